@@ -1,0 +1,93 @@
+#include "measure.hpp"
+
+#include <cmath>
+
+namespace demcal::engine {
+
+Energies energies(const World& world) {
+  Energies e;
+  const Particles& p = world.particles();
+  const Vec3 g = world.options().gravity;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    e.translational += 0.5 * p.m[i] * p.v[i].squaredNorm();
+    e.rotational += 0.5 * (0.4 * p.m[i] * p.r[i] * p.r[i]) * p.w[i].squaredNorm();
+    e.gravity -= p.m[i] * g.dot(p.x[i]);
+  }
+  const ContactParams& law = world.law();
+  world.for_each_contact([&](const ContactView& c) {
+    e.normal += 0.5 * law.kn * c.delta * c.delta;
+    if (law.ks > 0.0) e.tangential += 0.5 * c.fs.squaredNorm() / law.ks;
+    const double kr = law.b * law.ks * c.r_roll * c.r_roll;
+    if (kr > 0.0) e.rolling += 0.5 * c.mr.squaredNorm() / kr;
+  });
+  return e;
+}
+
+Mat3 love_weber_stress(const World& world, const Region& region) {
+  const Particles& p = world.particles();
+  Mat3 s = Mat3::Zero();
+  world.for_each_contact([&](const ContactView& c) {
+    // Each side of the contact contributes if its centre is inside the volume.
+    if (region.contains(p.x[c.i])) s += (c.arm_i * c.n) * c.force.transpose();
+    if (c.j >= 0 && region.contains(p.x[c.j])) s += (c.arm_j * c.n) * c.force.transpose();
+  });
+  // Branch on j points along -n and the force on j is -F: same sign as i's term.
+  return -s / region.volume();
+}
+
+Coordination coordination(const World& world) {
+  const Particles& p = world.particles();
+  std::vector<int> z(p.size(), 0);
+  long nc = 0;
+  world.for_each_contact([&](const ContactView& c) {
+    if (c.j < 0) return;
+    ++nc;
+    ++z[c.i];
+    ++z[c.j];
+  });
+  long np = 0, n0 = 0, n1 = 0, zsum = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    ++np;
+    zsum += z[i];
+    n0 += z[i] == 0;
+    n1 += z[i] == 1;
+  }
+  Coordination out;
+  out.contacts = nc;
+  out.rattlers = n0 + n1;
+  if (np > 0) out.all = static_cast<double>(zsum) / static_cast<double>(np);
+  if (np - n0 - n1 > 0) out.mechanical = static_cast<double>(zsum - n1) / static_cast<double>(np - n0 - n1);
+  return out;
+}
+
+double unbalanced_force_ratio(const World& world) {
+  const Particles& p = world.particles();
+  double fsum = 0.0;
+  long nm = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    fsum += p.f[i].norm();
+    ++nm;
+  }
+  double csum = 0.0;
+  long nc = 0;
+  world.for_each_contact([&](const ContactView& c) {
+    csum += c.force.norm();
+    ++nc;
+  });
+  if (nm == 0) return 0.0;
+  if (nc == 0 || csum == 0.0) return fsum > 0.0 ? INFINITY : 0.0;
+  return (fsum / nm) / (csum / nc);
+}
+
+double solid_volume(const World& world) {
+  const Particles& p = world.particles();
+  double v = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (!p.fixed[i]) v += sphere_volume(p.r[i]);
+  return v;
+}
+
+}  // namespace demcal::engine

@@ -1,0 +1,40 @@
+#pragma once
+// Cell-grid neighbour search with a Verlet skin, producing a half list (each pair
+// once, j > i) in compressed rows, with the contact history stored alongside and
+// carried over from the previous list at every rebuild.
+#include "domain.hpp"
+#include "particles.hpp"
+#include "types.hpp"
+
+#include <cstdint>
+#include <vector>
+
+namespace demcal::engine {
+
+class NeighborList {
+ public:
+  // Rows: the candidates of particle i are entries [start[i], start[i+1]).
+  std::vector<int> start;
+  std::vector<int> j;
+  // Contact history per entry: tangential spring force and rolling moment acting
+  // on i; `touching` flags entries whose history is live.
+  std::vector<Vec3> fs;
+  std::vector<Vec3> mr;
+  std::vector<std::uint8_t> touching;
+
+  // Rebuilds the list for the current positions; history of pairs present in both
+  // the old and the new list is kept. Pairs of two fixed grains are left out.
+  void build(const Particles& p, const Domain& dom, double skin, int threads);
+
+  // True when some particle has moved more than half the skin since the last build.
+  bool needs_rebuild(const Particles& p, const Domain& dom, double skin) const;
+
+  std::size_t size() const { return j.size(); }
+  long builds() const { return builds_; }
+
+ private:
+  std::vector<Vec3> x_build_;
+  long builds_ = 0;
+};
+
+}  // namespace demcal::engine

@@ -1,0 +1,176 @@
+#include "collision.hpp"
+
+#include "../errors.hpp"
+#include "../measure.hpp"
+#include "../packing.hpp"
+#include "../timestep.hpp"
+#include "../world.hpp"
+
+#include <chrono>
+#include <cmath>
+
+namespace demcal::engine {
+namespace {
+
+std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
+  std::vector<Wall> walls;
+  const char* names[3][2] = {{"x-", "x+"}, {"y-", "y+"}, {"z-", "z+"}};
+  for (int a = 0; a < 3; ++a) {
+    Wall w0, w1;
+    w0.name = names[a][0];
+    w0.point = lo;
+    w0.normal = Vec3::Unit(a);
+    w1.name = names[a][1];
+    w1.point = hi;
+    w1.normal = -Vec3::Unit(a);
+    walls.push_back(w0);
+    walls.push_back(w1);
+  }
+  return walls;
+}
+
+// Slope of y against x by least squares.
+double slope(const std::vector<double>& x, const std::vector<double>& y) {
+  const double n = static_cast<double>(x.size());
+  if (n < 2) return 0.0;
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    sx += x[i];
+    sy += y[i];
+    sxx += x[i] * x[i];
+    sxy += x[i] * y[i];
+  }
+  const double den = n * sxx - sx * sx;
+  return den != 0.0 ? (n * sxy - sx * sy) / den : 0.0;
+}
+
+}  // namespace
+
+void CollisionConfig::validate() const {
+  material.validate();
+  if (particles < 2) throw ConfigError("collision.particles", "must be at least 2");
+  if (!(solid_fraction > 0.0 && solid_fraction <= 0.4))
+    throw ConfigError("collision.solid_fraction", "must lie in (0, 0.4] for random insertion");
+  if (!std::isfinite(velocity_max) || velocity_max <= 0.0)
+    throw ConfigError("collision.velocity_max", "must be a finite number > 0");
+  if (!std::isfinite(dt) || dt < 0.0) throw ConfigError("numerics.dt", "must be finite and >= 0");
+  if (dt == 0.0 && (!std::isfinite(dt_factor) || dt_factor <= 0.0))
+    throw ConfigError("numerics.dt_factor", "must be a finite number > 0");
+  if (steps < 1) throw ConfigError("collision.steps", "must be at least 1");
+  if (sample_every < 1) throw ConfigError("collision.sample_every", "must be at least 1");
+  if (threads < 1) throw ConfigError("threads", "must be at least 1");
+}
+
+Metrics CollisionResult::metrics() const {
+  return {{"dt", dt},
+          {"dt_critical", dt_critical},
+          {"dt_over_critical", dt_critical > 0 ? dt / dt_critical : 0.0},
+          {"steps", static_cast<double>(steps_done)},
+          {"energy_initial", energy_initial},
+          {"energy_final", energy_final},
+          {"drift_per_million_steps", drift_per_million_steps},
+          {"max_relative_error", max_relative_error},
+          {"wall_s", wall_seconds},
+          {"particle_steps_per_s", particle_steps_per_second}};
+}
+
+CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
+  cfg.validate();
+  CollisionResult res;
+  res.energy.name = "energy";
+  res.energy.columns = {"step", "time", "kinetic", "elastic", "total"};
+
+  Material mat = cfg.material;
+  if (!cfg.keep_friction) {
+    mat.friction_angle = 0.0;
+    mat.rolling_eta = 0.0;
+  }
+  std::mt19937_64 rng(cfg.seed);
+  std::vector<double> radii = sample_radii(cfg.particles, mat.d_min, mat.d_max, rng);
+  double vs = 0.0;
+  for (double r : radii) vs += sphere_volume(r);
+  const double edge = std::cbrt(vs / cfg.solid_fraction);
+  const Vec3 lo = Vec3::Zero(), hi = Vec3::Constant(edge);
+  Particles p;
+  insert_random(p, radii, lo, hi, mat.density, rng);
+  for (auto& v : p.v)
+    for (int a = 0; a < 3; ++a) v[a] = uniform(rng, -cfg.velocity_max, cfg.velocity_max);
+
+  double m_min = 1e300;
+  for (double m : p.m) m_min = std::min(m_min, m);
+  WorldOptions opt;
+  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, mat.kn);
+  opt.threads = cfg.threads;
+  opt.allow_unstable_dt = cfg.allow_unstable_dt;
+  opt.max_overlap_fraction = cfg.max_overlap_fraction;
+  Domain dom;
+  dom.lo = lo;
+  dom.hi = hi;
+
+  ContactParams law = contact_params(mat);
+  if (!cfg.keep_friction) law.ks = 0.0;  // frictionless: the tangential spring carries nothing
+  World world(std::move(p), box_walls(lo, hi), dom, law, opt);
+  const StabilityLimits lim = stability_limits(world);
+  res.dt = opt.dt;
+  res.dt_critical = lim.governing().dt_critical;
+  res.critical_mode = lim.governing().mode;
+
+  if (obs) obs->on_stage("collision");
+  std::vector<double> steps_x, rel_e;
+  auto sample = [&]() {
+    const Energies e = energies(world);
+    const double total = e.kinetic() + e.elastic();
+    if (world.step_count() == 0) res.energy_initial = total;
+    res.energy_final = total;
+    const double rel = total / res.energy_initial - 1.0;
+    res.max_relative_error = std::max(res.max_relative_error, std::abs(rel));
+    steps_x.push_back(static_cast<double>(world.step_count()));
+    rel_e.push_back(rel);
+    res.energy.add({static_cast<double>(world.step_count()), world.time(), e.kinetic(), e.elastic(), total}, obs);
+  };
+
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    world.invalidate_forces();
+    world.run(0);
+    sample();
+    while (world.step_count() < cfg.steps) {
+      const long chunk = std::min(cfg.sample_every, cfg.steps - world.step_count());
+      world.run(chunk);
+      sample();
+      if (obs) obs->on_progress(static_cast<double>(world.step_count()) / static_cast<double>(cfg.steps));
+    }
+  } catch (const InstabilityError& e) {
+    res.outcome.status = SceneStatus::unstable;
+    res.outcome.failed_stage = "collision";
+    res.outcome.message = e.what();
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.steps_done = world.step_count();
+  res.wall_seconds = secs;
+  res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
+  res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;
+  if (!res.outcome.ok()) res.drift_per_million_steps = INFINITY;
+  return res;
+}
+
+TimestepSweep sweep_timestep(const CollisionConfig& base, const std::vector<double>& factors, double tolerance,
+                             Observer* obs) {
+  TimestepSweep sw;
+  sw.factors = factors;
+  for (double k : factors) {
+    CollisionConfig c = base;
+    c.dt = 0.0;
+    c.dt_factor = k;
+    c.allow_unstable_dt = true;
+    CollisionResult r = run_collision(c, obs);
+    if (r.outcome.ok() && std::abs(r.drift_per_million_steps) <= tolerance && k > sw.recommended_factor) {
+      sw.recommended_factor = k;
+      sw.recommended_dt = r.dt;
+    }
+    sw.runs.push_back(std::move(r));
+  }
+  return sw;
+}
+
+}  // namespace demcal::engine

@@ -1,0 +1,32 @@
+#pragma once
+// How a scene ended. A failed scene still returns its result, with the stage that
+// failed and why, and never a metric computed from a broken run.
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace demcal::engine {
+
+enum class SceneStatus { ok, unstable, not_converged, not_settled };
+
+inline const char* to_string(SceneStatus s) {
+  switch (s) {
+    case SceneStatus::ok: return "ok";
+    case SceneStatus::unstable: return "unstable";
+    case SceneStatus::not_converged: return "not_converged";
+    case SceneStatus::not_settled: return "not_settled";
+  }
+  return "unknown";
+}
+
+struct SceneOutcome {
+  SceneStatus status = SceneStatus::ok;
+  std::string failed_stage;  // empty when ok
+  std::string message;       // why it failed, or warnings when ok
+  std::vector<std::string> warnings;
+  bool ok() const { return status == SceneStatus::ok; }
+};
+
+using Metrics = std::vector<std::pair<std::string, double>>;
+
+}  // namespace demcal::engine

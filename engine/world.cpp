@@ -1,0 +1,363 @@
+#include "world.hpp"
+
+#include "errors.hpp"
+#include "timestep.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+namespace demcal::engine {
+
+// Per-thread accumulators of the force loop, padded against false sharing.
+struct alignas(64) ThreadAcc {
+  std::vector<Vec3> wall_force;
+  std::vector<int> wall_contacts;
+  std::vector<double> wall_stiffness;
+  double max_overlap = 0.0;
+  long max_overlap_i = -1;
+};
+
+namespace {
+
+int thread_id() {
+#ifdef _OPENMP
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+
+void require_finite_positive(double v, const char* field) {
+  if (!std::isfinite(v) || v <= 0.0) throw ConfigError(field, "must be a finite positive number");
+}
+
+}  // namespace
+
+World::World(Particles particles, std::vector<Wall> walls, const Domain& domain, const ContactParams& law,
+             const WorldOptions& options)
+    : p_(std::move(particles)), walls_(std::move(walls)), dom_(domain), law_(law), opt_(options) {
+  require_finite_positive(opt_.dt, "dt");
+  require_finite_positive(law_.kn, "material.kn");
+  if (!std::isfinite(law_.ks) || law_.ks < 0.0) throw ConfigError("material.ks", "must be finite and >= 0");
+  if (!std::isfinite(opt_.local_damping) || opt_.local_damping < 0.0 || opt_.local_damping >= 1.0)
+    throw ConfigError("local_damping", "must lie in [0, 1)");
+  if (opt_.threads < 1) opt_.threads = 1;
+  for (auto& w : walls_) {
+    const double len = w.normal.norm();
+    if (!(len > 0.0) || !std::isfinite(len)) throw ConfigError("wall." + w.name + ".normal", "must be a non-zero vector");
+    w.normal /= len;
+  }
+  double d_min = 1e300;
+  for (std::size_t i = 0; i < p_.size(); ++i) d_min = std::min(d_min, 2.0 * p_.r[i]);
+  skin_ = opt_.skin > 0.0 ? opt_.skin : (p_.size() ? 0.1 * d_min : 0.0);
+  if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
+  const std::size_t nw = walls_.size() * p_.size();
+  wall_fs_.assign(nw, Vec3::Zero());
+  wall_mr_.assign(nw, Vec3::Zero());
+  wall_touch_.assign(nw, 0);
+  buf_f_.resize(opt_.threads);
+  buf_t_.resize(opt_.threads);
+  for (int t = 1; t < opt_.threads; ++t) {
+    buf_f_[t].assign(p_.size(), Vec3::Zero());
+    buf_t_[t].assign(p_.size(), Vec3::Zero());
+  }
+}
+
+void World::set_contact_params(const ContactParams& law) {
+  law_ = law;
+  if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
+  forces_valid_ = false;
+}
+
+void World::set_dt(double dt) {
+  require_finite_positive(dt, "dt");
+  if (!opt_.allow_unstable_dt) check_timestep(dt, stability_limits(*this, dt));
+  opt_.dt = dt;
+}
+
+template <bool Periodic>
+void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
+  const double dt = opt_.dt;
+  const ContactParams law = law_;
+  const bool frictional = law.ks > 0.0;
+  const bool rolling = law.rolling();
+  const std::size_t np = p_.size();
+  const Vec3* X = p_.x.data();
+  const Vec3* V = p_.v.data();
+  const Vec3* W = p_.w.data();
+  const double* R = p_.r.data();
+  const int* J = nl_.j.data();
+  Vec3* FS = nl_.fs.data();
+  Vec3* MR = nl_.mr.data();
+  std::uint8_t* TOUCH = nl_.touching.data();
+
+  for (int i = begin; i < end; ++i) {
+    const Vec3 xi = X[i], vi = V[i], wi = W[i];
+    const double ri = R[i];
+    Vec3 fi = Vec3::Zero(), ti = Vec3::Zero();
+    for (int e = nl_.start[i]; e < nl_.start[i + 1]; ++e) {
+      const int j = J[e];
+      Vec3 d = X[j] - xi;
+      if constexpr (Periodic) dom_.min_image(d);
+      const double dist2 = d.squaredNorm();
+      const double rsum = ri + R[j];
+      if (dist2 >= rsum * rsum) {
+        if (TOUCH[e]) {
+          FS[e].setZero();
+          MR[e].setZero();
+          TOUCH[e] = 0;
+        }
+        continue;
+      }
+      TOUCH[e] = 1;
+      const double dist = std::sqrt(dist2);
+      ContactKinematics k;
+      k.n = d / dist;
+      k.delta = rsum - dist;
+      const double ai = ri - 0.5 * k.delta, aj = R[j] - 0.5 * k.delta;
+      k.v_rel = vi - V[j] + (ai * wi + aj * W[j]).cross(k.n);
+      k.w_rel = wi - W[j];
+      k.spin_n = 0.5 * (wi + W[j]).dot(k.n);
+      k.r_roll = 0.5 * rsum;
+      const ContactResponse c = apply_contact_law(law, dt, k, FS[e], MR[e], frictional, rolling);
+      const Vec3 arm_cross = k.n.cross(c.fs);
+      fi += c.force;
+      F[j] -= c.force;
+      ti += ai * arm_cross + MR[e];
+      T[j] += aj * arm_cross - MR[e];
+      const double ratio = k.delta / std::min(ri, R[j]);
+      if (ratio > acc.max_overlap) {
+        acc.max_overlap = ratio;
+        acc.max_overlap_i = i;
+      }
+    }
+    for (std::size_t w = 0; w < walls_.size(); ++w) {
+      const Wall& wall = walls_[w];
+      const std::size_t slot = w * np + static_cast<std::size_t>(i);
+      const double h = wall.active ? wall.distance(xi) : ri;
+      if (h >= ri) {
+        if (wall_touch_[slot]) {
+          wall_fs_[slot].setZero();
+          wall_mr_[slot].setZero();
+          wall_touch_[slot] = 0;
+        }
+        continue;
+      }
+      wall_touch_[slot] = 1;
+      ContactKinematics k;
+      k.n = -wall.normal;
+      k.delta = ri - h;
+      k.v_rel = vi - wall.velocity + (h * wi).cross(k.n);
+      k.w_rel = wi;
+      k.spin_n = 0.5 * wi.dot(k.n);
+      k.r_roll = ri;
+      const ContactResponse c = apply_contact_law(law, dt, k, wall_fs_[slot], wall_mr_[slot],
+                                                  wall.frictional && frictional, wall.rolling && rolling);
+      fi += c.force;
+      ti += h * k.n.cross(c.fs) + wall_mr_[slot];
+      acc.wall_force[w] -= c.force;
+      acc.wall_contacts[w] += 1;
+      acc.wall_stiffness[w] += law.kn;
+      const double ratio = k.delta / ri;
+      if (ratio > acc.max_overlap) {
+        acc.max_overlap = ratio;
+        acc.max_overlap_i = i;
+      }
+    }
+    F[i] += fi;
+    T[i] += ti;
+  }
+}
+
+void World::compute_forces() {
+  if (nl_.needs_rebuild(p_, dom_, skin_)) nl_.build(p_, dom_, skin_, opt_.threads);
+  const int n = static_cast<int>(p_.size());
+  const int nt = opt_.threads;
+  const std::size_t nw = walls_.size();
+  std::vector<ThreadAcc> acc(nt);
+  for (auto& a : acc) {
+    a.wall_force.assign(nw, Vec3::Zero());
+    a.wall_contacts.assign(nw, 0);
+    a.wall_stiffness.assign(nw, 0.0);
+  }
+  const bool periodic = dom_.any_periodic();
+
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = thread_id();
+    Vec3* F = tid == 0 ? p_.f.data() : buf_f_[tid].data();
+    Vec3* T = tid == 0 ? p_.t.data() : buf_t_[tid].data();
+    std::fill(F, F + n, Vec3::Zero());
+    std::fill(T, T + n, Vec3::Zero());
+    // Rows get shorter with i in a half list; interleaved chunks balance the load.
+    const int chunk = 64;
+#pragma omp barrier
+#pragma omp for schedule(static, chunk) nowait
+    for (int b = 0; b < n; b += chunk) {
+      const int e = std::min(n, b + chunk);
+      if (periodic)
+        force_range<true>(b, e, F, T, acc[tid]);
+      else
+        force_range<false>(b, e, F, T, acc[tid]);
+    }
+#pragma omp barrier
+    // Sum the private buffers, add gravity and (preparation only) local damping.
+    const Vec3 g = opt_.gravity;
+    const double alpha = opt_.local_damping;
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) {
+      Vec3 f = p_.f[i], t = p_.t[i];
+      for (int s = 1; s < nt; ++s) {
+        f += buf_f_[s][i];
+        t += buf_t_[s][i];
+      }
+      if (!p_.fixed[i]) {
+        f += p_.m[i] * g;
+        if (alpha > 0.0) {
+          for (int a = 0; a < 3; ++a) {
+            f[a] -= alpha * std::abs(f[a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
+            t[a] -= alpha * std::abs(t[a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
+          }
+        }
+      }
+      p_.f[i] = f;
+      p_.t[i] = t;
+    }
+  }
+
+  max_overlap_ratio_ = 0.0;
+  max_overlap_particle_ = -1;
+  for (std::size_t w = 0; w < nw; ++w) {
+    walls_[w].force.setZero();
+    walls_[w].contacts = 0;
+    walls_[w].stiffness = 0.0;
+  }
+  for (const auto& a : acc) {
+    for (std::size_t w = 0; w < nw; ++w) {
+      walls_[w].force += a.wall_force[w];
+      walls_[w].contacts += a.wall_contacts[w];
+      walls_[w].stiffness += a.wall_stiffness[w];
+    }
+    if (a.max_overlap > max_overlap_ratio_) {
+      max_overlap_ratio_ = a.max_overlap;
+      max_overlap_particle_ = a.max_overlap_i;
+    }
+  }
+  forces_valid_ = true;
+}
+
+void World::step() {
+  if (!forces_valid_) compute_forces();
+  const int n = static_cast<int>(p_.size());
+  const double dt = opt_.dt, half = 0.5 * dt;
+  const bool periodic = dom_.any_periodic();
+
+  // Work done on the grains by moving walls over this step (trapezoidal rule).
+  double wall_power_before = 0.0;
+  for (const auto& w : walls_) wall_power_before -= w.force.dot(w.velocity);
+
+#pragma omp parallel for schedule(static) num_threads(opt_.threads)
+  for (int i = 0; i < n; ++i) {
+    if (!p_.fixed[i]) {
+      p_.v[i] += (half * p_.inv_m[i]) * p_.f[i];
+      p_.w[i] += (half * p_.inv_i[i]) * p_.t[i];
+    }
+    p_.x[i] += dt * p_.v[i];
+    if (periodic) dom_.wrap(p_.x[i]);
+  }
+  for (auto& w : walls_) w.point += dt * w.velocity;
+
+  compute_forces();
+
+  bool finite = true;
+#pragma omp parallel for schedule(static) num_threads(opt_.threads) reduction(&& : finite)
+  for (int i = 0; i < n; ++i) {
+    if (!p_.fixed[i]) {
+      p_.v[i] += (half * p_.inv_m[i]) * p_.f[i];
+      p_.w[i] += (half * p_.inv_i[i]) * p_.t[i];
+    }
+    finite = finite && std::isfinite(p_.x[i].sum() + p_.v[i].sum() + p_.w[i].sum());
+  }
+  double wall_power_after = 0.0;
+  for (const auto& w : walls_) wall_power_after -= w.force.dot(w.velocity);
+  wall_work_ += half * (wall_power_before + wall_power_after);
+
+  ++step_;
+  time_ += dt;
+  if (!finite) check_finite_and_overlap();
+  if (max_overlap_ratio_ > opt_.max_overlap_fraction) check_finite_and_overlap();
+  if (guard_tol_ >= 0.0 && step_ % guard_interval_ == 0) check_energy();
+}
+
+void World::check_finite_and_overlap() {
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    const char* what = nullptr;
+    if (!std::isfinite(p_.x[i].sum())) what = "position";
+    else if (!std::isfinite(p_.v[i].sum())) what = "velocity";
+    else if (!std::isfinite(p_.w[i].sum())) what = "angular velocity";
+    if (what) {
+      std::ostringstream os;
+      os << "unstable integration at step " << step_ << ": particle " << i << " has a non-finite " << what
+         << " (dt = " << opt_.dt << " s)";
+      throw InstabilityError(step_, static_cast<long>(i), what, os.str());
+    }
+  }
+  if (max_overlap_ratio_ > opt_.max_overlap_fraction) {
+    std::ostringstream os;
+    os << "unstable integration at step " << step_ << ": particle " << max_overlap_particle_ << " overlaps by "
+       << max_overlap_ratio_ << " of the smaller radius (limit " << opt_.max_overlap_fraction
+       << "); the time step " << opt_.dt << " s is too large or the stiffness too low for the load";
+    throw InstabilityError(step_, max_overlap_particle_, "overlap", os.str());
+  }
+}
+
+double World::guard_energy() const {
+  double e = 0.0;
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    if (p_.fixed[i]) continue;
+    const double inertia = 0.4 * p_.m[i] * p_.r[i] * p_.r[i];
+    e += 0.5 * p_.m[i] * p_.v[i].squaredNorm() + 0.5 * inertia * p_.w[i].squaredNorm();
+    e -= p_.m[i] * opt_.gravity.dot(p_.x[i]);
+  }
+  for_each_contact([&](const ContactView& c) {
+    e += contact_elastic_energy(law_, c.delta, c.fs, c.mr, c.r_roll);
+  });
+  return e;
+}
+
+void World::enable_energy_guard(double rel_tolerance, long interval) {
+  if (!forces_valid_) compute_forces();
+  guard_tol_ = rel_tolerance;
+  guard_interval_ = std::max(1L, interval);
+  guard_ref_ = guard_energy();
+  guard_work_ref_ = wall_work_;
+}
+
+void World::check_energy() {
+  const double e = guard_energy();
+  const double input = wall_work_ - guard_work_ref_;
+  const double scale = std::max({std::abs(guard_ref_), std::abs(input), 1e-300});
+  const double excess = e - guard_ref_ - input;
+  if (excess > guard_tol_ * scale) {
+    long worst = -1;
+    double worst_ke = -1.0;
+    for (std::size_t i = 0; i < p_.size(); ++i) {
+      const double ke = p_.m[i] * p_.v[i].squaredNorm();
+      if (ke > worst_ke) {
+        worst_ke = ke;
+        worst = static_cast<long>(i);
+      }
+    }
+    std::ostringstream os;
+    os << "unstable integration at step " << step_ << ": total energy grew by " << excess / scale * 100.0
+       << "% of its reference with no source of energy (limit " << guard_tol_ * 100.0
+       << "%); fastest particle " << worst << "; dt = " << opt_.dt << " s";
+    throw InstabilityError(step_, worst, "energy", os.str());
+  }
+}
+
+}  // namespace demcal::engine

@@ -1,0 +1,173 @@
+#pragma once
+// The DEM system: particles, walls, contact law, neighbour list and the velocity
+// Verlet integrator. Scenes drive a World; measurements read it.
+#include "contact_law.hpp"
+#include "domain.hpp"
+#include "material.hpp"
+#include "neighbor_grid.hpp"
+#include "particles.hpp"
+#include "wall.hpp"
+
+#include <string>
+#include <vector>
+
+namespace demcal::engine {
+
+struct WorldOptions {
+  double dt = 0.0;              // time step [s]; must be set
+  double skin = 0.0;            // Verlet skin [m]; 0 picks 0.1 * smallest diameter
+  Vec3 gravity = Vec3::Zero();  // [m/s^2]
+  double local_damping = 0.0;   // Cundall's non-viscous damping, preparation only
+  double max_overlap_fraction = 0.25;  // overlap / smaller radius that counts as blown up
+  int threads = 1;
+  bool allow_unstable_dt = false;  // for stability studies only: skip the critical-step refusal
+};
+
+// One contact as measurements see it (recomputed from positions and history).
+struct ContactView {
+  int i;
+  int j;                 // other particle, or -1 for a wall
+  int wall;              // wall index, or -1 for a pair
+  Vec3 n;                // unit normal from i towards j / the wall
+  double delta;          // overlap
+  Vec3 force;            // force on i
+  Vec3 fs, mr;           // tangential force and rolling moment on i
+  double arm_i, arm_j;   // distance from each centre to the contact point
+  double r_roll;
+};
+
+class World {
+ public:
+  World(Particles particles, std::vector<Wall> walls, const Domain& domain, const ContactParams& law,
+        const WorldOptions& options);
+
+  // One velocity-Verlet step of translation and rotation.
+  void step();
+  void run(long steps) {
+    for (long s = 0; s < steps; ++s) step();
+  }
+
+  // Stage switches (dense preparation sets friction after a frictionless stage).
+  void set_contact_params(const ContactParams& law);
+  void set_local_damping(double alpha) { opt_.local_damping = alpha; }
+  void set_dt(double dt);
+  void invalidate_forces() { forces_valid_ = false; }
+
+  // Energy-balance guard: from now on, total energy (kinetic + elastic + gravity)
+  // may not exceed its present value plus the work done by moving walls by more
+  // than `rel_tolerance` of the reference; checked every `interval` steps.
+  void enable_energy_guard(double rel_tolerance, long interval = 100);
+  void disable_energy_guard() { guard_tol_ = -1.0; }
+
+  const Particles& particles() const { return p_; }
+  Particles& particles() { return p_; }
+  const std::vector<Wall>& walls() const { return walls_; }
+  std::vector<Wall>& walls() { return walls_; }
+  const Domain& domain() const { return dom_; }
+  Domain& domain() { return dom_; }
+  const ContactParams& law() const { return law_; }
+  const WorldOptions& options() const { return opt_; }
+  const NeighborList& neighbors() const { return nl_; }
+
+  long step_count() const { return step_; }
+  double time() const { return time_; }
+  double dt() const { return opt_.dt; }
+  double skin() const { return skin_; }
+  double wall_work() const { return wall_work_; }  // work done on the grains by moving walls [J]
+  double max_overlap_ratio() const { return max_overlap_ratio_; }  // of the last force evaluation
+
+  // Calls f(const ContactView&) for every live contact, pairs then walls. Serial.
+  template <class F>
+  void for_each_contact(F&& f) const;
+
+  // Total energy the guard watches: kinetic + elastic + gravitational potential.
+  double guard_energy() const;
+
+ private:
+  void compute_forces();
+  template <bool Periodic>
+  void force_range(int begin, int end, Vec3* F, Vec3* T, struct ThreadAcc& acc);
+  void check_finite_and_overlap();
+  void check_energy();
+
+  Particles p_;
+  std::vector<Wall> walls_;
+  Domain dom_;
+  ContactParams law_;
+  WorldOptions opt_;
+  NeighborList nl_;
+  double skin_ = 0.0;
+
+  // Per-wall contact history, indexed [wall * N + particle].
+  std::vector<Vec3> wall_fs_, wall_mr_;
+  std::vector<std::uint8_t> wall_touch_;
+
+  // Thread-private force buffers (thread 0 writes the particles' own arrays).
+  std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+
+  long step_ = 0;
+  double time_ = 0.0;
+  bool forces_valid_ = false;
+  double wall_work_ = 0.0;
+  double max_overlap_ratio_ = 0.0;
+  long max_overlap_particle_ = -1;
+
+  double guard_tol_ = -1.0;
+  long guard_interval_ = 100;
+  double guard_ref_ = 0.0;
+  double guard_work_ref_ = 0.0;
+};
+
+template <class F>
+void World::for_each_contact(F&& f) const {
+  const int n = static_cast<int>(p_.size());
+  for (int i = 0; i < n; ++i) {
+    for (int e = nl_.start[i]; e < nl_.start[i + 1]; ++e) {
+      if (!nl_.touching[e]) continue;
+      const int j = nl_.j[e];
+      Vec3 d = p_.x[j] - p_.x[i];
+      dom_.min_image(d);
+      const double dist = d.norm();
+      const double delta = p_.r[i] + p_.r[j] - dist;
+      if (delta <= 0.0) continue;
+      ContactView c;
+      c.i = i;
+      c.j = j;
+      c.wall = -1;
+      c.n = d / dist;
+      c.delta = delta;
+      c.fs = nl_.fs[e];
+      c.mr = nl_.mr[e];
+      c.force = c.fs - law_.kn * delta * c.n;
+      c.arm_i = p_.r[i] - 0.5 * delta;
+      c.arm_j = p_.r[j] - 0.5 * delta;
+      c.r_roll = 0.5 * (p_.r[i] + p_.r[j]);
+      f(c);
+    }
+  }
+  for (std::size_t w = 0; w < walls_.size(); ++w) {
+    const Wall& wall = walls_[w];
+    if (!wall.active) continue;
+    for (int i = 0; i < n; ++i) {
+      const double h = wall.distance(p_.x[i]);
+      const double delta = p_.r[i] - h;
+      if (delta <= 0.0) continue;
+      const std::size_t k = w * p_.size() + static_cast<std::size_t>(i);
+      ContactView c;
+      c.i = i;
+      c.j = -1;
+      c.wall = static_cast<int>(w);
+      c.n = -wall.normal;
+      c.delta = delta;
+      c.fs = wall_fs_[k];
+      c.mr = wall_mr_[k];
+      c.force = c.fs - law_.kn * delta * c.n;
+      c.arm_i = h;
+      c.arm_j = 0.0;
+      c.r_roll = p_.r[i];
+      f(c);
+    }
+  }
+}
+
+}  // namespace demcal::engine
