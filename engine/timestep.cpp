@@ -16,11 +16,12 @@ struct Body {
   double inertia() const { return 0.4 * m * r * r; }
 };
 
+// Keeps the fastest frequency of each (mode, contact) pair.
 void keep_worst(std::vector<ModeLimit>& modes, const std::string& mode, const std::string& contact, double omega2) {
   if (!(omega2 > 0.0)) return;
   const double omega = std::sqrt(omega2);
   for (auto& m : modes) {
-    if (m.mode == mode) {
+    if (m.mode == mode && m.contact == contact) {
       if (omega > m.omega) m = ModeLimit{mode, contact, omega, 2.0 / omega};
       return;
     }

@@ -18,7 +18,7 @@ struct ModeLimit {
 };
 
 struct StabilityLimits {
-  std::vector<ModeLimit> modes;  // one entry per mode present, each its worst contact
+  std::vector<ModeLimit> modes;  // one entry per (mode, contact) present
   double base_step = 0.0;        // sqrt(m_min / Kn), the seed's Eq. 2.9 with k = 1
   // Upper bound on the highest frequency with the contacts the packing has now
   // (Gershgorin); 0 when no contacts exist. Always at least the isolated limit.

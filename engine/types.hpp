@@ -1,6 +1,7 @@
 #pragma once
 // Basic types shared by the whole engine. SI units everywhere; angles in radians.
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 
 namespace demcal::engine {

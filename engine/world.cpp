@@ -54,11 +54,11 @@ World::World(Particles particles, std::vector<Wall> walls, const Domain& domain,
   double d_min = 1e300;
   for (std::size_t i = 0; i < p_.size(); ++i) d_min = std::min(d_min, 2.0 * p_.r[i]);
   skin_ = opt_.skin > 0.0 ? opt_.skin : (p_.size() ? 0.1 * d_min : 0.0);
-  if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
   const std::size_t nw = walls_.size() * p_.size();
   wall_fs_.assign(nw, Vec3::Zero());
   wall_mr_.assign(nw, Vec3::Zero());
   wall_touch_.assign(nw, 0);
+  if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
   buf_f_.resize(opt_.threads);
   buf_t_.resize(opt_.threads);
   for (int t = 1; t < opt_.threads; ++t) {
@@ -77,6 +77,25 @@ void World::set_dt(double dt) {
   require_finite_positive(dt, "dt");
   if (!opt_.allow_unstable_dt) check_timestep(dt, stability_limits(*this, dt));
   opt_.dt = dt;
+}
+
+void World::rotate(const Mat3& q, const Vec3& centre) {
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    p_.x[i] = centre + q * (p_.x[i] - centre);
+    p_.v[i] = q * p_.v[i];
+    p_.w[i] = q * p_.w[i];
+  }
+  for (auto& w : walls_) {
+    w.point = centre + q * (w.point - centre);
+    w.normal = q * w.normal;
+    w.velocity = q * w.velocity;
+  }
+  for (auto& h : nl_.fs) h = q * h;
+  for (auto& h : nl_.mr) h = q * h;
+  for (auto& h : wall_fs_) h = q * h;
+  for (auto& h : wall_mr_) h = q * h;
+  nl_.build(p_, dom_, skin_, opt_.threads);  // same pairs; history carried over
+  forces_valid_ = false;
 }
 
 template <bool Periodic>

@@ -52,6 +52,15 @@ class World {
   void set_local_damping(double alpha) { opt_.local_damping = alpha; }
   void set_dt(double dt);
   void invalidate_forces() { forces_valid_ = false; }
+  // Evaluates forces (and contact flags) for the current state if they are stale;
+  // measurements read contacts, so call this before measuring a fresh world.
+  void refresh() {
+    if (!forces_valid_) compute_forces();
+  }
+
+  // Rotates the whole system rigidly about `centre`: grains, walls and every
+  // contact's history. Used to check frame indifference.
+  void rotate(const Mat3& q, const Vec3& centre);
 
   // Energy-balance guard: from now on, total energy (kinetic + elastic + gravity)
   // may not exceed its present value plus the work done by moving walls by more
@@ -121,7 +130,8 @@ class World {
 template <class F>
 void World::for_each_contact(F&& f) const {
   const int n = static_cast<int>(p_.size());
-  for (int i = 0; i < n; ++i) {
+  const bool listed = nl_.start.size() == p_.size() + 1;  // no list before the first force evaluation
+  for (int i = 0; listed && i < n; ++i) {
     for (int e = nl_.start[i]; e < nl_.start[i + 1]; ++e) {
       if (!nl_.touching[e]) continue;
       const int j = nl_.j[e];
@@ -145,7 +155,7 @@ void World::for_each_contact(F&& f) const {
       f(c);
     }
   }
-  for (std::size_t w = 0; w < walls_.size(); ++w) {
+  for (std::size_t w = 0; w < walls_.size() && wall_fs_.size() == walls_.size() * p_.size(); ++w) {
     const Wall& wall = walls_[w];
     if (!wall.active) continue;
     for (int i = 0; i < n; ++i) {

@@ -131,8 +131,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
 
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    world.invalidate_forces();
-    world.run(0);
+    world.refresh();
     sample();
     while (world.step_count() < cfg.steps) {
       const long chunk = std::min(cfg.sample_every, cfg.steps - world.step_count());

@@ -1,0 +1,122 @@
+#include "schema.hpp"
+
+#include <fstream>
+#include <sys/stat.h>
+
+namespace demcal::db {
+namespace {
+
+const char* const kMigrations[] = {
+    // 0 -> 1
+    R"sql(
+CREATE TABLE jobs(
+  id INTEGER PRIMARY KEY,
+  name TEXT NOT NULL UNIQUE,
+  spec_json TEXT NOT NULL,
+  created_at REAL NOT NULL,
+  updated_at REAL NOT NULL);
+-- A task is one unit of work, identified by its content key; several jobs may
+-- share it through job_tasks, so identical work is never run twice.
+CREATE TABLE tasks(
+  id INTEGER PRIMARY KEY,
+  job_id INTEGER NOT NULL REFERENCES jobs(id),
+  scene TEXT NOT NULL,
+  params_json TEXT NOT NULL,
+  key TEXT NOT NULL UNIQUE,
+  status TEXT NOT NULL DEFAULT 'pending'
+    CHECK(status IN ('pending', 'running', 'done', 'failed')),
+  attempts INTEGER NOT NULL DEFAULT 0,
+  worker TEXT,
+  pid INTEGER,
+  started_at REAL,
+  finished_at REAL,
+  wall_s REAL,
+  error TEXT);
+CREATE INDEX tasks_status ON tasks(status);
+CREATE TABLE job_tasks(
+  job_id INTEGER NOT NULL REFERENCES jobs(id),
+  idx INTEGER NOT NULL,
+  task_id INTEGER NOT NULL REFERENCES tasks(id),
+  PRIMARY KEY(job_id, idx));
+CREATE INDEX job_tasks_task ON job_tasks(task_id);
+CREATE TABLE metrics(
+  task_id INTEGER NOT NULL REFERENCES tasks(id),
+  name TEXT NOT NULL,
+  value REAL,
+  PRIMARY KEY(task_id, name));
+CREATE TABLE artifacts(
+  task_id INTEGER NOT NULL REFERENCES tasks(id),
+  kind TEXT NOT NULL,
+  path TEXT NOT NULL,
+  PRIMARY KEY(task_id, kind, path));
+CREATE TABLE fits(
+  id INTEGER PRIMARY KEY,
+  created_at REAL NOT NULL,
+  targets_json TEXT NOT NULL,
+  method TEXT NOT NULL,
+  result_json TEXT NOT NULL);
+)sql",
+};
+static_assert(sizeof(kMigrations) / sizeof(kMigrations[0]) == kSchemaVersion, "one migration per version");
+
+int pragma_int(Connection& c, const char* sql) {
+  Statement s = c.prepare(sql);
+  return s.step() ? static_cast<int>(s.int64(0)) : 0;
+}
+
+bool file_is_empty_or_missing(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return true;
+  return st.st_size == 0;
+}
+
+void check_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw DbError("cannot read database " + path, true);
+  char head[16] = {};
+  in.read(head, sizeof head);
+  if (in.gcount() != 16 || std::string(head, 16) != std::string("SQLite format 3\0", 16))
+    throw DbError(path + " is not a SQLite database (and was left untouched)", true);
+}
+
+}  // namespace
+
+void check_file(const std::string& path) {
+  if (file_is_empty_or_missing(path)) return;
+  check_header(path);
+  Connection c(path, /*read_only=*/true);
+  try {
+    Statement qc = c.prepare("PRAGMA quick_check");
+    if (!qc.step() || qc.text(0) != "ok")
+      throw DbError(path + " is corrupt (quick_check: " + qc.text(0) + "); left untouched", true);
+  } catch (const DbError& e) {
+    if (e.bad_input()) throw;
+    throw DbError(path + " cannot be read as a database: " + e.what(), true);
+  }
+  const int version = pragma_int(c, "PRAGMA user_version");
+  const int app = pragma_int(c, "PRAGMA application_id");
+  const int tables = pragma_int(c, "SELECT count(*) FROM sqlite_master");
+  if (app != kApplicationId && (app != 0 || version != 0 || tables > 0))
+    throw DbError(path + " is a SQLite database but not a demcal one (left untouched)", true);
+  if (version > kSchemaVersion)
+    throw DbError(path + " has schema version " + std::to_string(version) + ", newer than this demcal supports (" +
+                      std::to_string(kSchemaVersion) + "); upgrade demcal",
+                  true);
+}
+
+void migrate(Connection& c) {
+  int version = pragma_int(c, "PRAGMA user_version");
+  while (version < kSchemaVersion) {
+    Transaction t(c);
+    // Re-read inside the write lock: another runner may have migrated meanwhile.
+    version = pragma_int(c, "PRAGMA user_version");
+    if (version >= kSchemaVersion) break;
+    c.exec(kMigrations[version]);
+    ++version;
+    c.exec(("PRAGMA user_version = " + std::to_string(version)).c_str());
+    c.exec(("PRAGMA application_id = " + std::to_string(kApplicationId)).c_str());
+    t.commit();
+  }
+}
+
+}  // namespace demcal::db

@@ -1,0 +1,99 @@
+#include "sqlite.hpp"
+
+#include <sqlite3.h>
+
+#include <cmath>
+
+namespace demcal::db {
+namespace {
+[[noreturn]] void fail(sqlite3* db, const std::string& what, int rc) {
+  const bool bad = rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT;
+  throw DbError(what + ": " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)), bad);
+}
+}  // namespace
+
+Connection::Connection(const std::string& path, bool read_only) : path_(path) {
+  const int flags = read_only ? SQLITE_OPEN_READONLY : (SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+  const int rc = sqlite3_open_v2(path.c_str(), &db_, flags | SQLITE_OPEN_NOMUTEX, nullptr);
+  if (rc != SQLITE_OK) {
+    std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
+    sqlite3_close(db_);
+    db_ = nullptr;
+    throw DbError("cannot open database " + path + ": " + msg, rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT);
+  }
+  // Two runners share one file: wait for the other's write lock instead of failing.
+  sqlite3_busy_timeout(db_, 30000);
+  sqlite3_extended_result_codes(db_, 0);
+}
+
+Connection::~Connection() { sqlite3_close(db_); }
+
+void Connection::exec(const char* sql) {
+  char* err = nullptr;
+  const int rc = sqlite3_exec(db_, sql, nullptr, nullptr, &err);
+  if (rc != SQLITE_OK) {
+    std::string msg = err ? err : sqlite3_errstr(rc);
+    sqlite3_free(err);
+    throw DbError(path_ + ": " + msg, rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT);
+  }
+}
+
+Statement Connection::prepare(const char* sql) { return Statement(*this, sql); }
+std::int64_t Connection::last_insert_id() const { return sqlite3_last_insert_rowid(db_); }
+int Connection::changes() const { return sqlite3_changes(db_); }
+
+Statement::Statement(Connection& c, const char* sql) : conn_(&c) {
+  const int rc = sqlite3_prepare_v2(c.handle(), sql, -1, &st_, nullptr);
+  if (rc != SQLITE_OK) fail(c.handle(), c.path(), rc);
+}
+
+Statement::~Statement() { sqlite3_finalize(st_); }
+
+Statement& Statement::bind(int i, std::int64_t v) {
+  sqlite3_bind_int64(st_, i, v);
+  return *this;
+}
+Statement& Statement::bind(int i, double v) {
+  sqlite3_bind_double(st_, i, v);
+  return *this;
+}
+Statement& Statement::bind(int i, const std::string& v) {
+  sqlite3_bind_text(st_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT);
+  return *this;
+}
+Statement& Statement::bind_null(int i) {
+  sqlite3_bind_null(st_, i);
+  return *this;
+}
+
+bool Statement::step() {
+  const int rc = sqlite3_step(st_);
+  if (rc == SQLITE_ROW) return true;
+  if (rc == SQLITE_DONE) return false;
+  fail(conn_->handle(), conn_->path(), rc);
+}
+
+void Statement::reset() {
+  sqlite3_reset(st_);
+  sqlite3_clear_bindings(st_);
+}
+
+std::int64_t Statement::int64(int col) const { return sqlite3_column_int64(st_, col); }
+double Statement::real(int col) const { return is_null(col) ? NAN : sqlite3_column_double(st_, col); }
+std::string Statement::text(int col) const {
+  const auto* p = sqlite3_column_text(st_, col);
+  return p ? std::string(reinterpret_cast<const char*>(p), static_cast<std::size_t>(sqlite3_column_bytes(st_, col)))
+           : std::string();
+}
+bool Statement::is_null(int col) const { return sqlite3_column_type(st_, col) == SQLITE_NULL; }
+
+Transaction::Transaction(Connection& c) : c_(c) { c_.exec("BEGIN IMMEDIATE"); }
+Transaction::~Transaction() {
+  if (!done_) sqlite3_exec(c_.handle(), "ROLLBACK", nullptr, nullptr, nullptr);
+}
+void Transaction::commit() {
+  c_.exec("COMMIT");
+  done_ = true;
+}
+
+}  // namespace demcal::db

@@ -1,0 +1,91 @@
+#pragma once
+// A thin RAII layer over the SQLite C API. Every value reaches SQL through a bound
+// parameter; SQL text is only ever a literal in this layer.
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+struct sqlite3;
+struct sqlite3_stmt;
+
+namespace demcal::db {
+
+// bad_input: the file is not one we may use (not SQLite, not ours, too new,
+// corrupt); the CLI maps it to exit code 2. Otherwise a runtime failure (exit 1).
+class DbError : public std::runtime_error {
+ public:
+  DbError(const std::string& what, bool bad_input = false) : std::runtime_error(what), bad_input_(bad_input) {}
+  bool bad_input() const { return bad_input_; }
+
+ private:
+  bool bad_input_;
+};
+
+class Statement;
+
+class Connection {
+ public:
+  Connection(const std::string& path, bool read_only);
+  ~Connection();
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+
+  void exec(const char* sql);  // statements without parameters (DDL, PRAGMA, BEGIN)
+  Statement prepare(const char* sql);
+  std::int64_t last_insert_id() const;
+  int changes() const;
+  sqlite3* handle() const { return db_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  sqlite3* db_ = nullptr;
+  std::string path_;
+};
+
+class Statement {
+ public:
+  Statement(Connection& c, const char* sql);
+  ~Statement();
+  Statement(Statement&& o) noexcept : conn_(o.conn_), st_(o.st_) { o.st_ = nullptr; }
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+
+  Statement& bind(int i, std::int64_t v);
+  Statement& bind(int i, int v) { return bind(i, static_cast<std::int64_t>(v)); }
+  Statement& bind(int i, double v);
+  Statement& bind(int i, const std::string& v);
+  Statement& bind_null(int i);
+  Statement& bind(int i, const std::optional<std::string>& v) { return v ? bind(i, *v) : bind_null(i); }
+
+  bool step();  // true while a row is available
+  void run() {
+    while (step()) {
+    }
+  }
+  void reset();
+
+  std::int64_t int64(int col) const;
+  double real(int col) const;  // NULL reads as NaN
+  std::string text(int col) const;  // NULL reads as ""
+  bool is_null(int col) const;
+
+ private:
+  Connection* conn_;
+  sqlite3_stmt* st_ = nullptr;
+};
+
+// BEGIN IMMEDIATE ... COMMIT; rolls back when left by an exception. IMMEDIATE takes
+// the write lock up front, so two runners never deadlock upgrading a read lock.
+class Transaction {
+ public:
+  explicit Transaction(Connection& c);
+  ~Transaction();
+  void commit();
+
+ private:
+  Connection& c_;
+  bool done_ = false;
+};
+
+}  // namespace demcal::db

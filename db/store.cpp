@@ -1,0 +1,225 @@
+#include "store.hpp"
+
+#include "schema.hpp"
+
+#include <chrono>
+#include <set>
+
+namespace demcal::db {
+namespace {
+
+// Checking before opening read-write means a foreign or newer file is never touched.
+const std::string& checked(const std::string& path) {
+  check_file(path);
+  return path;
+}
+
+const char* const kTaskColumns =
+    "t.id, t.scene, t.params_json, t.key, t.status, t.attempts, t.worker, t.pid, t.started_at, "
+    "t.finished_at, t.wall_s, t.error";
+
+TaskRow read_task(const Statement& s, int first = 0) {
+  TaskRow r;
+  r.id = s.int64(first + 0);
+  r.scene = s.text(first + 1);
+  r.params_json = s.text(first + 2);
+  r.key = s.text(first + 3);
+  r.status = s.text(first + 4);
+  r.attempts = static_cast<int>(s.int64(first + 5));
+  r.worker = s.text(first + 6);
+  r.pid = s.int64(first + 7);
+  r.started_at = s.real(first + 8);
+  r.finished_at = s.real(first + 9);
+  r.wall_s = s.real(first + 10);
+  r.error = s.text(first + 11);
+  return r;
+}
+
+}  // namespace
+
+double unix_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+Store::Store(const std::string& path, bool read_only) : path_(path), conn_(checked(path), read_only) {
+  if (read_only) return;
+  conn_.exec("PRAGMA journal_mode = WAL");
+  conn_.exec("PRAGMA synchronous = NORMAL");  // WAL + NORMAL: durable across process kills
+  conn_.exec("PRAGMA foreign_keys = ON");
+  migrate(conn_);
+}
+
+std::optional<std::int64_t> Store::find_job(const std::string& name) {
+  Statement s = conn_.prepare("SELECT id FROM jobs WHERE name = ?");
+  s.bind(1, name);
+  if (s.step()) return s.int64(0);
+  return std::nullopt;
+}
+
+std::int64_t Store::put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks) {
+  Transaction t(conn_);
+  const double now = unix_now();
+  std::int64_t job_id;
+  if (auto id = find_job(name)) {
+    job_id = *id;
+    conn_.prepare("UPDATE jobs SET spec_json = ?, updated_at = ? WHERE id = ?").bind(1, spec_json).bind(2, now).bind(3, job_id).run();
+    conn_.prepare("DELETE FROM job_tasks WHERE job_id = ?").bind(1, job_id).run();
+  } else {
+    conn_.prepare("INSERT INTO jobs(name, spec_json, created_at, updated_at) VALUES(?, ?, ?, ?)")
+        .bind(1, name).bind(2, spec_json).bind(3, now).bind(4, now).run();
+    job_id = conn_.last_insert_id();
+  }
+  Statement ins = conn_.prepare("INSERT OR IGNORE INTO tasks(job_id, scene, params_json, key) VALUES(?, ?, ?, ?)");
+  Statement find = conn_.prepare("SELECT id FROM tasks WHERE key = ?");
+  Statement link = conn_.prepare("INSERT INTO job_tasks(job_id, idx, task_id) VALUES(?, ?, ?)");
+  for (std::size_t i = 0; i < tasks.size(); ++i) {
+    ins.reset();
+    ins.bind(1, job_id).bind(2, tasks[i].scene).bind(3, tasks[i].params_json).bind(4, tasks[i].key).run();
+    find.reset();
+    find.bind(1, tasks[i].key);
+    if (!find.step()) throw DbError("task vanished while inserting: " + tasks[i].key);
+    const std::int64_t task_id = find.int64(0);
+    find.reset();
+    link.reset();
+    link.bind(1, job_id).bind(2, static_cast<std::int64_t>(i)).bind(3, task_id).run();
+  }
+  t.commit();
+  return job_id;
+}
+
+std::vector<TaskRow> Store::tasks(const std::string& job) {
+  std::vector<TaskRow> out;
+  if (job.empty()) {
+    // Every task once, listed under the job that created it.
+    const std::string sql = std::string("SELECT ") + kTaskColumns +
+                            ", j.name, (SELECT min(idx) FROM job_tasks jt WHERE jt.task_id = t.id AND jt.job_id = t.job_id)"
+                            " FROM tasks t JOIN jobs j ON j.id = t.job_id ORDER BY t.id";
+    Statement s = conn_.prepare(sql.c_str());
+    while (s.step()) {
+      TaskRow r = read_task(s);
+      r.job = s.text(12);
+      r.index = s.is_null(13) ? -1 : s.int64(13);
+      out.push_back(std::move(r));
+    }
+    return out;
+  }
+  const std::string sql = std::string("SELECT ") + kTaskColumns +
+                          ", jt.idx FROM job_tasks jt JOIN jobs j ON j.id = jt.job_id JOIN tasks t ON t.id = jt.task_id"
+                          " WHERE j.name = ? ORDER BY jt.idx";
+  Statement s = conn_.prepare(sql.c_str());
+  s.bind(1, job);
+  while (s.step()) {
+    TaskRow r = read_task(s);
+    r.job = job;
+    r.index = s.int64(12);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+std::optional<TaskRow> Store::task(std::int64_t id) {
+  const std::string sql = std::string("SELECT ") + kTaskColumns +
+                          ", j.name FROM tasks t JOIN jobs j ON j.id = t.job_id WHERE t.id = ?";
+  Statement s = conn_.prepare(sql.c_str());
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  TaskRow r = read_task(s);
+  r.job = s.text(12);
+  return r;
+}
+
+bool Store::claim(std::int64_t task_id, const std::string& worker) {
+  conn_.prepare(
+           "UPDATE tasks SET status = 'running', worker = ?, pid = NULL, attempts = attempts + 1, started_at = ?,"
+           " finished_at = NULL, wall_s = NULL, error = NULL WHERE id = ? AND status = 'pending'")
+      .bind(1, worker).bind(2, unix_now()).bind(3, task_id).run();
+  return conn_.changes() == 1;
+}
+
+void Store::set_pid(std::int64_t task_id, std::int64_t pid) {
+  conn_.prepare("UPDATE tasks SET pid = ? WHERE id = ?").bind(1, pid).bind(2, task_id).run();
+}
+
+bool Store::finish(std::int64_t task_id, const std::string& worker, const Outcome& out) {
+  Transaction t(conn_);
+  conn_.prepare(
+           "UPDATE tasks SET status = ?, finished_at = ?, wall_s = ?, error = ?"
+           " WHERE id = ? AND status = 'running' AND worker = ?")
+      .bind(1, out.status).bind(2, unix_now()).bind(3, out.wall_s)
+      .bind(4, out.error.empty() ? std::optional<std::string>() : std::optional<std::string>(out.error))
+      .bind(5, task_id).bind(6, worker).run();
+  if (conn_.changes() != 1) return false;  // rolled back: someone else owns it now
+  conn_.prepare("DELETE FROM metrics WHERE task_id = ?").bind(1, task_id).run();
+  conn_.prepare("DELETE FROM artifacts WHERE task_id = ?").bind(1, task_id).run();
+  Statement m = conn_.prepare("INSERT INTO metrics(task_id, name, value) VALUES(?, ?, ?)");
+  for (const auto& [name, value] : out.metrics) {
+    m.reset();
+    m.bind(1, task_id).bind(2, name).bind(3, value).run();
+  }
+  Statement a = conn_.prepare("INSERT OR IGNORE INTO artifacts(task_id, kind, path) VALUES(?, ?, ?)");
+  for (const auto& [kind, path] : out.artifacts) {
+    a.reset();
+    a.bind(1, task_id).bind(2, kind).bind(3, path).run();
+  }
+  t.commit();
+  return true;
+}
+
+void Store::release(std::int64_t task_id, const std::string& worker, const std::string& note) {
+  conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL, error = ?"
+                " WHERE id = ? AND status = 'running' AND worker = ?")
+      .bind(1, note).bind(2, task_id).bind(3, worker).run();
+}
+
+int Store::requeue_dead(const std::function<bool(const std::string&)>& alive) {
+  std::set<std::string> workers;
+  {
+    Statement s = conn_.prepare("SELECT DISTINCT worker FROM tasks WHERE status = 'running'");
+    while (s.step()) workers.insert(s.text(0));
+  }
+  int n = 0;
+  for (const auto& w : workers) {
+    if (alive(w)) continue;
+    conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
+                  " error = 'runner died; re-queued' WHERE status = 'running' AND worker IS ?")
+        .bind(1, w).run();
+    n += conn_.changes();
+  }
+  return n;
+}
+
+int Store::reset_failed(std::int64_t job_id) {
+  conn_.prepare("UPDATE tasks SET status = 'pending' WHERE status = 'failed'"
+                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
+      .bind(1, job_id).run();
+  return conn_.changes();
+}
+
+StatusCounts Store::counts(const std::string& job) {
+  StatusCounts out;
+  Statement s = conn_.prepare(
+      "SELECT j.name, t.status, count(*) FROM job_tasks jt JOIN jobs j ON j.id = jt.job_id"
+      " JOIN tasks t ON t.id = jt.task_id WHERE ? = '' OR j.name = ? GROUP BY j.name, t.status ORDER BY j.name");
+  s.bind(1, job).bind(2, job);
+  while (s.step()) out[s.text(0)][s.text(1)] = static_cast<int>(s.int64(2));
+  if (!job.empty() && out.empty() && find_job(job)) out[job];
+  return out;
+}
+
+std::vector<std::pair<std::string, double>> Store::metrics(std::int64_t task_id) {
+  std::vector<std::pair<std::string, double>> out;
+  Statement s = conn_.prepare("SELECT name, value FROM metrics WHERE task_id = ? ORDER BY rowid");
+  s.bind(1, task_id);
+  while (s.step()) out.emplace_back(s.text(0), s.real(1));
+  return out;
+}
+
+std::vector<std::pair<std::string, std::string>> Store::artifacts(std::int64_t task_id) {
+  std::vector<std::pair<std::string, std::string>> out;
+  Statement s = conn_.prepare("SELECT kind, path FROM artifacts WHERE task_id = ? ORDER BY rowid");
+  s.bind(1, task_id);
+  while (s.step()) out.emplace_back(s.text(0), s.text(1));
+  return out;
+}
+
+}  // namespace demcal::db

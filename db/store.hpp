@@ -1,0 +1,85 @@
+#pragma once
+// The demcal store: jobs, their tasks, metrics, artifacts and fits in one SQLite
+// file. It stores strings and numbers; what a job or a parameter means is the jobs
+// layer's business. Only the runner's parent process writes to it.
+#include "sqlite.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace demcal::db {
+
+struct NewTask {
+  std::string key;
+  std::string scene;
+  std::string params_json;
+};
+
+struct TaskRow {
+  std::int64_t id = 0;
+  std::string job;         // the job this row was listed for
+  std::int64_t index = -1; // position in that job's expansion
+  std::string scene, params_json, key, status;
+  int attempts = 0;
+  std::string worker;
+  std::int64_t pid = 0;
+  double started_at = 0, finished_at = 0, wall_s = 0;  // NaN when unset
+  std::string error;
+};
+
+struct Outcome {
+  std::string status;  // "done" or "failed"
+  double wall_s = 0;
+  std::string error;
+  std::vector<std::pair<std::string, double>> metrics;
+  std::vector<std::pair<std::string, std::string>> artifacts;  // kind, path
+};
+
+using StatusCounts = std::map<std::string, std::map<std::string, int>>;  // job -> status -> n
+
+class Store {
+ public:
+  // Checks the file read-only first (see check_file), then opens it read-write,
+  // switches on WAL and migrates. `read_only` skips the write part entirely.
+  explicit Store(const std::string& path, bool read_only = false);
+
+  // Records the job (by name; a changed spec replaces the old one) and links it to
+  // its tasks, creating those whose key is new. Returns the job id.
+  std::int64_t put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks);
+  std::optional<std::int64_t> find_job(const std::string& name);
+
+  // Tasks of a job in expansion order, or every task when job is empty.
+  std::vector<TaskRow> tasks(const std::string& job = "");
+  std::optional<TaskRow> task(std::int64_t id);
+
+  // Atomic: succeeds for exactly one caller while the task is pending.
+  bool claim(std::int64_t task_id, const std::string& worker);
+  void set_pid(std::int64_t task_id, std::int64_t pid);
+  // Results and the status change in one transaction; ignored if the task is no
+  // longer held by `worker` (it was re-queued meanwhile).
+  bool finish(std::int64_t task_id, const std::string& worker, const Outcome& out);
+  // Back to pending (interrupted): attempts are kept.
+  void release(std::int64_t task_id, const std::string& worker, const std::string& note);
+  // Running tasks whose worker `alive` says is gone go back to pending. Returns count.
+  int requeue_dead(const std::function<bool(const std::string& worker)>& alive);
+  int reset_failed(std::int64_t job_id);
+
+  StatusCounts counts(const std::string& job = "");
+  std::vector<std::pair<std::string, double>> metrics(std::int64_t task_id);
+  std::vector<std::pair<std::string, std::string>> artifacts(std::int64_t task_id);
+
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  Connection conn_;
+};
+
+double unix_now();
+
+}  // namespace demcal::db

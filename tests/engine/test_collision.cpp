@@ -1,0 +1,80 @@
+// The seed's elastic collision test (Fig. 2.6) as a scene.
+#include "engine/errors.hpp"
+#include "engine/scenes/collision.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+using namespace demcal::engine;
+
+namespace {
+CollisionConfig small() {
+  CollisionConfig c;
+  c.particles = 250;
+  c.steps = 20000;
+  c.sample_every = 1000;
+  c.solid_fraction = 0.3;
+  return c;
+}
+}  // namespace
+
+TEST(CollisionScene, SmallStepConservesEnergy) {
+  CollisionConfig c = small();
+  c.dt_factor = 0.05;
+  const CollisionResult r = run_collision(c);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  EXPECT_EQ(r.energy.rows.size(), 21u);
+  EXPECT_LT(r.max_relative_error, 1e-3);
+  EXPECT_EQ(r.critical_mode, "normal");
+}
+
+TEST(CollisionScene, DriftGrowsWithTheStep) {
+  CollisionConfig c = small();
+  c.dt_factor = 0.05;
+  const double fine = run_collision(c).max_relative_error;
+  c.dt_factor = 0.6;
+  const double coarse = run_collision(c).max_relative_error;
+  std::printf("[ report   ] max relative energy error: %.2e at k = 0.05, %.2e at k = 0.6\n", fine, coarse);
+  EXPECT_GT(coarse, 3.0 * fine);
+}
+
+TEST(CollisionScene, BeyondTheCriticalStepIsRefusedUnlessAStudyAsksForIt) {
+  CollisionConfig c = small();
+  c.dt_factor = 2.0;  // the pair normal limit is about sqrt(2) = 1.41 for equal smallest grains
+  EXPECT_THROW(run_collision(c), TimestepError);
+  c.allow_unstable_dt = true;
+  const CollisionResult r = run_collision(c);
+  EXPECT_GT(r.dt / r.dt_critical, 1.0);
+  EXPECT_FALSE(r.outcome.ok() && r.max_relative_error < 1e-2) << "an unstable step went unnoticed";
+}
+
+TEST(CollisionScene, SweepRecommendsTheLargestStepWithinTolerance) {
+  CollisionConfig c = small();
+  c.steps = 10000;
+  const TimestepSweep s = sweep_timestep(c, {0.05, 0.2, 2.5}, 1e-2);
+  ASSERT_EQ(s.runs.size(), 3u);
+  EXPECT_FALSE(s.runs[2].outcome.ok() && std::abs(s.runs[2].drift_per_million_steps) < 1e-2);
+  EXPECT_GE(s.recommended_factor, 0.05);
+  EXPECT_LE(s.recommended_factor, 0.2);
+}
+
+TEST(CollisionScene, InvalidConfigNamesTheField) {
+  CollisionConfig c = small();
+  c.solid_fraction = 0.9;
+  try {
+    run_collision(c);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.field(), "collision.solid_fraction");
+  }
+  c = small();
+  c.material.d_min = 3e-3;
+  try {
+    run_collision(c);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.field(), "material.diameter");
+  }
+}
