@@ -14,9 +14,6 @@ namespace demcal::engine {
 
 // Per-thread accumulators of the force loop, padded against false sharing.
 struct alignas(64) ThreadAcc {
-  std::vector<Vec3> wall_force;
-  std::vector<int> wall_contacts;
-  std::vector<double> wall_stiffness;
   double max_overlap = 0.0;
   long max_overlap_i = -1;
 };
@@ -84,18 +81,22 @@ void World::rotate(const Mat3& q, const Vec3& centre) {
     p_.x[i] = centre + q * (p_.x[i] - centre);
     p_.v[i] = q * p_.v[i];
     p_.w[i] = q * p_.w[i];
+    p_.f[i] = q * p_.f[i];
+    p_.t[i] = q * p_.t[i];
   }
   for (auto& w : walls_) {
     w.point = centre + q * (w.point - centre);
     w.normal = q * w.normal;
     w.velocity = q * w.velocity;
+    w.force = q * w.force;
   }
   for (auto& h : nl_.fs) h = q * h;
   for (auto& h : nl_.mr) h = q * h;
   for (auto& h : wall_fs_) h = q * h;
   for (auto& h : wall_mr_) h = q * h;
-  nl_.build(p_, dom_, skin_, opt_.threads);  // same pairs; history carried over
-  forces_valid_ = false;
+  wall_list_builds_ = -1;  // walls turned: their candidate lists are stale
+  // Same pairs, history carried over; forces were rotated, so they stay valid.
+  if (nl_.start.size() == p_.size() + 1) nl_.build(p_, dom_, skin_, opt_.threads);
 }
 
 template <bool Periodic>
@@ -104,7 +105,6 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   const ContactParams law = law_;
   const bool frictional = law.ks > 0.0;
   const bool rolling = law.rolling();
-  const std::size_t np = p_.size();
   const Vec3* X = p_.x.data();
   const Vec3* V = p_.v.data();
   const Vec3* W = p_.w.data();
@@ -154,10 +154,49 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
         acc.max_overlap_i = i;
       }
     }
-    for (std::size_t w = 0; w < walls_.size(); ++w) {
-      const Wall& wall = walls_[w];
+    F[i] += fi;
+    T[i] += ti;
+  }
+}
+
+void World::update_wall_candidates() {
+  bool stale = nl_.builds() != wall_list_builds_ || wall_near_.size() != walls_.size();
+  for (std::size_t w = 0; !stale && w < walls_.size(); ++w)
+    stale = std::abs((walls_[w].point - wall_point_build_[w]).dot(walls_[w].normal)) > 0.5 * skin_;
+  if (!stale) return;
+  wall_near_.assign(walls_.size(), {});
+  wall_point_build_.resize(walls_.size());
+  for (std::size_t w = 0; w < walls_.size(); ++w) {
+    wall_point_build_[w] = walls_[w].point;
+    for (std::size_t i = 0; i < p_.size(); ++i) {
+      const std::size_t slot = w * p_.size() + i;
+      if (walls_[w].distance(p_.x[i]) < p_.r[i] + skin_) {
+        wall_near_[w].push_back(static_cast<int>(i));
+      } else if (wall_touch_[slot]) {  // cannot be touching: a stale history would linger
+        wall_fs_[slot].setZero();
+        wall_mr_[slot].setZero();
+        wall_touch_[slot] = 0;
+      }
+    }
+  }
+  wall_list_builds_ = nl_.builds();
+}
+
+// Grain-wall contacts, serially: only grains within the skin of a wall are tested.
+void World::wall_forces(double& max_overlap, long& max_overlap_i) {
+  const double dt = opt_.dt;
+  const ContactParams law = law_;
+  const bool frictional = law.ks > 0.0, rolling = law.rolling();
+  const std::size_t np = p_.size();
+  for (std::size_t w = 0; w < walls_.size(); ++w) {
+    Wall& wall = walls_[w];
+    wall.force.setZero();
+    wall.contacts = 0;
+    wall.stiffness = 0.0;
+    for (int i : wall_near_[w]) {
       const std::size_t slot = w * np + static_cast<std::size_t>(i);
-      const double h = wall.active ? wall.distance(xi) : ri;
+      const double ri = p_.r[i];
+      const double h = wall.active ? wall.distance(p_.x[i]) : ri;
       if (h >= ri) {
         if (wall_touch_[slot]) {
           wall_fs_[slot].setZero();
@@ -170,39 +209,31 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       ContactKinematics k;
       k.n = -wall.normal;
       k.delta = ri - h;
-      k.v_rel = vi - wall.velocity + (h * wi).cross(k.n);
-      k.w_rel = wi;
-      k.spin_n = 0.5 * wi.dot(k.n);
+      k.v_rel = p_.v[i] - wall.velocity + (h * p_.w[i]).cross(k.n);
+      k.w_rel = p_.w[i];
+      k.spin_n = 0.5 * p_.w[i].dot(k.n);
       k.r_roll = ri;
       const ContactResponse c = apply_contact_law(law, dt, k, wall_fs_[slot], wall_mr_[slot],
                                                   wall.frictional && frictional, wall.rolling && rolling);
-      fi += c.force;
-      ti += h * k.n.cross(c.fs) + wall_mr_[slot];
-      acc.wall_force[w] -= c.force;
-      acc.wall_contacts[w] += 1;
-      acc.wall_stiffness[w] += law.kn;
-      const double ratio = k.delta / ri;
-      if (ratio > acc.max_overlap) {
-        acc.max_overlap = ratio;
-        acc.max_overlap_i = i;
+      p_.f[i] += c.force;
+      p_.t[i] += h * k.n.cross(c.fs) + wall_mr_[slot];
+      wall.force -= c.force;
+      wall.contacts += 1;
+      wall.stiffness += law.kn;
+      if (k.delta / ri > max_overlap) {
+        max_overlap = k.delta / ri;
+        max_overlap_i = i;
       }
     }
-    F[i] += fi;
-    T[i] += ti;
   }
 }
 
 void World::compute_forces() {
   if (nl_.needs_rebuild(p_, dom_, skin_)) nl_.build(p_, dom_, skin_, opt_.threads);
+  update_wall_candidates();
   const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
-  const std::size_t nw = walls_.size();
   std::vector<ThreadAcc> acc(nt);
-  for (auto& a : acc) {
-    a.wall_force.assign(nw, Vec3::Zero());
-    a.wall_contacts.assign(nw, 0);
-    a.wall_stiffness.assign(nw, 0.0);
-  }
   const bool periodic = dom_.any_periodic();
 
 #pragma omp parallel num_threads(nt)
@@ -215,7 +246,7 @@ void World::compute_forces() {
     // Rows get shorter with i in a half list; interleaved chunks balance the load.
     const int chunk = 64;
 #pragma omp barrier
-#pragma omp for schedule(static, chunk) nowait
+#pragma omp for schedule(static, 1) nowait
     for (int b = 0; b < n; b += chunk) {
       const int e = std::min(n, b + chunk);
       if (periodic)
@@ -224,46 +255,41 @@ void World::compute_forces() {
         force_range<false>(b, e, F, T, acc[tid]);
     }
 #pragma omp barrier
-    // Sum the private buffers, add gravity and (preparation only) local damping.
-    const Vec3 g = opt_.gravity;
-    const double alpha = opt_.local_damping;
+    if (nt > 1) {
 #pragma omp for schedule(static)
-    for (int i = 0; i < n; ++i) {
-      Vec3 f = p_.f[i], t = p_.t[i];
-      for (int s = 1; s < nt; ++s) {
-        f += buf_f_[s][i];
-        t += buf_t_[s][i];
-      }
-      if (!p_.fixed[i]) {
-        f += p_.m[i] * g;
-        if (alpha > 0.0) {
-          for (int a = 0; a < 3; ++a) {
-            f[a] -= alpha * std::abs(f[a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
-            t[a] -= alpha * std::abs(t[a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
-          }
+      for (int i = 0; i < n; ++i) {
+        for (int s = 1; s < nt; ++s) {
+          p_.f[i] += buf_f_[s][i];
+          p_.t[i] += buf_t_[s][i];
         }
       }
-      p_.f[i] = f;
-      p_.t[i] = t;
     }
   }
 
   max_overlap_ratio_ = 0.0;
   max_overlap_particle_ = -1;
-  for (std::size_t w = 0; w < nw; ++w) {
-    walls_[w].force.setZero();
-    walls_[w].contacts = 0;
-    walls_[w].stiffness = 0.0;
-  }
   for (const auto& a : acc) {
-    for (std::size_t w = 0; w < nw; ++w) {
-      walls_[w].force += a.wall_force[w];
-      walls_[w].contacts += a.wall_contacts[w];
-      walls_[w].stiffness += a.wall_stiffness[w];
-    }
     if (a.max_overlap > max_overlap_ratio_) {
       max_overlap_ratio_ = a.max_overlap;
       max_overlap_particle_ = a.max_overlap_i;
+    }
+  }
+  wall_forces(max_overlap_ratio_, max_overlap_particle_);
+
+  // Gravity and (preparation only) local damping act on the total force.
+  const Vec3 g = opt_.gravity;
+  const double alpha = opt_.local_damping;
+  if (g.squaredNorm() > 0.0 || alpha > 0.0) {
+#pragma omp parallel for schedule(static) num_threads(nt)
+    for (int i = 0; i < n; ++i) {
+      if (p_.fixed[i]) continue;
+      p_.f[i] += p_.m[i] * g;
+      if (alpha > 0.0) {
+        for (int a = 0; a < 3; ++a) {
+          p_.f[i][a] -= alpha * std::abs(p_.f[i][a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
+          p_.t[i][a] -= alpha * std::abs(p_.t[i][a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
+        }
+      }
     }
   }
   forces_valid_ = true;

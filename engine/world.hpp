@@ -96,6 +96,8 @@ class World {
   void compute_forces();
   template <bool Periodic>
   void force_range(int begin, int end, Vec3* F, Vec3* T, struct ThreadAcc& acc);
+  void update_wall_candidates();
+  void wall_forces(double& max_overlap, long& max_overlap_i);
   void check_finite_and_overlap();
   void check_energy();
 
@@ -110,6 +112,11 @@ class World {
   // Per-wall contact history, indexed [wall * N + particle].
   std::vector<Vec3> wall_fs_, wall_mr_;
   std::vector<std::uint8_t> wall_touch_;
+  // Grains within a skin of each wall, rebuilt with the neighbour list or when a
+  // wall has moved more than half the skin.
+  std::vector<std::vector<int>> wall_near_;
+  std::vector<Vec3> wall_point_build_;
+  long wall_list_builds_ = -1;
 
   // Thread-private force buffers (thread 0 writes the particles' own arrays).
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
