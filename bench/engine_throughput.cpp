@@ -11,6 +11,7 @@
 #include "engine/timestep.hpp"
 #include "engine/world.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -51,67 +52,75 @@ double wall_pressure(const World& w) {
   return s / 3;
 }
 
-World dense_pack(std::size_t n, int threads, bool rolling) {
+// Grains of a random cloud grow homogeneously inside six fixed walls, the growth
+// rate servoed on the wall pressure (no transport across the box is needed, unlike
+// moving walls), frictionless first, then friction and rolling resistance are
+// switched on and the pack relaxes at the target pressure.
+World dense_pack(std::size_t n, int threads, bool rolling, double pressure) {
   std::mt19937_64 rng(42);
   auto radii = sample_radii(n, 1e-3, 2e-3, rng);
   double vs = 0;
   for (double r : radii) vs += sphere_volume(r);
-  const double phi0 = 0.30, phi1 = 0.62;
-  const double edge = std::cbrt(vs / phi0);
+  const double phi0 = 0.35;
+  const double edge = std::cbrt(vs / phi0 * std::pow(0.8, 3));  // grains start at 80% size
   Particles p;
+  for (auto& r : radii) r *= 0.8;
   insert_random(p, radii, Vec3::Zero(), Vec3::Constant(edge), 2650.0, rng);
-  const double grow = std::cbrt(phi1 / phi0);
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    p.r[i] *= grow;
-    p.m[i] *= grow * grow * grow;
-    p.inv_m[i] = 1.0 / p.m[i];
-    p.inv_i[i] = 1.0 / (0.4 * p.m[i] * p.r[i] * p.r[i]);
-  }
-  // Walls at the centres' extent plus a radius: the inflated grains fill the box.
-  p.scale_density(1e6);
+  p.scale_density(1e6);  // statics: heavier grains allow a larger step
   Domain dom;
   dom.hi = Vec3::Constant(edge);
-  ContactParams law{3e7, 2.7e7, std::tan(30.0 * kPi / 180.0), 1.0, rolling ? 0.1 : 0.0};
   double m_min = 1e300;
   for (double m : p.m) m_min = std::min(m_min, m);
+  const ContactParams full{3e7, 2.7e7, std::tan(30.0 * kPi / 180.0), 1.0, rolling ? 0.1 : 0.0};
+  ContactParams smooth = full;
+  smooth.tan_theta = 0.0;
+  smooth.eta = 0.0;
   WorldOptions o;
-  o.dt = 0.15 * std::sqrt(m_min / law.kn);
+  o.dt = 0.15 * std::sqrt(m_min / full.kn);
   o.threads = threads;
   o.local_damping = 0.7;
-  o.max_overlap_fraction = 1.0;
-  World w(std::move(p), walls_of(Vec3::Constant(edge)), dom, law, o);
-  for (int k = 0; k < 40 && (k < 4 || unbalanced_force_ratio(w) > 0.05); ++k) w.run(250);
-  // Bisect a uniform scale of all radii between an unjammed and an over-compressed
-  // state until the walls feel ~100 kPa, relaxing with damping at each trial: a
-  // jammed pack at a realistic stress.
-  const std::vector<double> r0 = w.particles().r;
-  double s_lo = 0.9, s_hi = 1.0;
-  for (int round = 0; round < 24; ++round) {
-    const double s = 0.5 * (s_lo + s_hi);
-    Particles& q = w.particles();
-    for (std::size_t i = 0; i < q.size(); ++i) {
-      q.r[i] = s * r0[i];
-      q.v[i].setZero();  // Cundall damping does not slow free flight
-      q.w[i].setZero();
+  World w(std::move(p), walls_of(Vec3::Constant(edge)), dom, smooth, o);
+  // Growth must stay quasi-static: an impact at the growth speed v = r*rate/dt
+  // pushes with v*sqrt(Kn m), which must stay well below the target contact force
+  // p d^2. Fast until the pack jams (Z >= 4), then slow and servoed on the stress.
+  auto grow = [&](long steps) {
+    const double slow = 0.05 * pressure * 2.25e-6 * w.dt() / (1e-3 * std::sqrt(full.kn * 5.2));
+    for (long s = 0; s < steps; s += 50) {
+      const bool jammed = 2.0 * coordination(w).contacts / n >= 4.0;
+      const double err = 1.0 - wall_pressure(w) / pressure;
+      const double rate = jammed ? std::clamp(slow * err, -slow, slow) : 1e-5;
+      Particles& q = w.particles();
+      const double f = std::pow(1.0 + rate, 50);
+      for (std::size_t i = 0; i < q.size(); ++i) {
+        q.r[i] *= f;
+        q.m[i] *= f * f * f;
+        q.inv_m[i] = 1.0 / q.m[i];
+        q.inv_i[i] = 1.0 / (0.4 * q.m[i] * q.r[i] * q.r[i]);
+        if (!jammed) {  // a hot gas would not jam: Cundall damping does not slow free flight
+          q.v[i].setZero();
+          q.w[i].setZero();
+        }
+      }
+      w.invalidate_forces();
+      w.run(50);
     }
-    w.invalidate_forces();
-    w.run(1000);
-    const double p_now = wall_pressure(w);
-    (p_now > 100e3 ? s_hi : s_lo) = s;
-    if (std::abs(p_now / 100e3 - 1.0) < 0.5 && unbalanced_force_ratio(w) < 0.05) break;
-    if (s_hi - s_lo < 1e-4) break;
+  };
+  for (int k = 0; k < 400; ++k) {
+    grow(500);
+    if (getenv("BENCH_DEBUG"))
+      std::fprintf(stderr, "  prep %d: p %.3g ufr %.3g z %.2f\n", k, wall_pressure(w), unbalanced_force_ratio(w),
+                   2.0 * coordination(w).contacts / n);
+    // A throughput pack needs a realistic contact network, not a converged test.
+    if (2.0 * coordination(w).contacts / n >= 4.0 && std::abs(wall_pressure(w) / pressure - 1.0) < 0.35 &&
+        unbalanced_force_ratio(w) < 0.1)
+      break;
   }
-  if (wall_pressure(w) < 10e3) {  // fell off the jamming point: go back to the jammed side
-    Particles& q = w.particles();
-    for (std::size_t i = 0; i < q.size(); ++i) {
-      q.r[i] = s_hi * r0[i];
-      q.v[i].setZero();
-      q.w[i].setZero();
-    }
-    w.invalidate_forces();
-    w.run(2000);
-  }
+  w.set_contact_params(full);
+  w.run(3000);
   w.set_local_damping(0.0);
+  if (getenv("BENCH_DEBUG"))
+    std::fprintf(stderr, "  with friction: p %.3g ufr %.3g z %.2f\n", wall_pressure(w), unbalanced_force_ratio(w),
+                 2.0 * coordination(w).contacts / n);
   return w;
 }
 
@@ -140,7 +149,7 @@ int main(int argc, char** argv) {
     for (bool rolling : {true, false}) {
       double base = 0;
       for (int t : threads) {
-        World w = dense_pack(n, t, rolling);
+        World w = dense_pack(n, t, rolling, 100e3);
         const long contacts = coordination(w).contacts;
         w.run(50);  // warm the caches and the list
         const auto t0 = std::chrono::steady_clock::now();

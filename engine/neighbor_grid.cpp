@@ -178,18 +178,22 @@ void NeighborList::build(const Particles& p, const Domain& dom, double skin, int
   mr.swap(new_mr);
   touching.swap(new_touch);
   x_build_ = p.x;
+  r_build_ = p.r;
   ++builds_;
 }
 
 bool NeighborList::needs_rebuild(const Particles& p, const Domain& dom, double skin) const {
   if (x_build_.size() != p.size()) return true;
-  const double limit2 = 0.25 * skin * skin;
+  // A pair can close by the displacement of each grain plus the growth of each
+  // radius since the build: rebuild when either side may have used half the skin.
+  const double half = 0.5 * skin;
   const std::size_t n = p.size();
   const bool periodic = dom.any_periodic();
   for (std::size_t i = 0; i < n; ++i) {
     Vec3 d = p.x[i] - x_build_[i];
     if (periodic) dom.min_image(d);
-    if (d.squaredNorm() > limit2) return true;
+    const double left = half - std::max(0.0, p.r[i] - r_build_[i]);
+    if (left <= 0.0 || d.squaredNorm() > left * left) return true;
   }
   return false;
 }

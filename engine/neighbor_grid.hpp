@@ -26,7 +26,8 @@ class NeighborList {
   // the old and the new list is kept. Pairs of two fixed grains are left out.
   void build(const Particles& p, const Domain& dom, double skin, int threads);
 
-  // True when some particle has moved more than half the skin since the last build.
+  // True when some particle has moved, or grown, by more than half the skin since
+  // the last build.
   bool needs_rebuild(const Particles& p, const Domain& dom, double skin) const;
 
   std::size_t size() const { return j.size(); }
@@ -34,6 +35,7 @@ class NeighborList {
 
  private:
   std::vector<Vec3> x_build_;
+  std::vector<double> r_build_;
   long builds_ = 0;
 };
 

@@ -135,7 +135,7 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       TOUCH[e] = 1;
       const double dist = std::sqrt(dist2);
       ContactKinematics k;
-      k.n = d / dist;
+      k.n = d * (1.0 / dist);  // one division, not three
       k.delta = rsum - dist;
       const double ai = ri - 0.5 * k.delta, aj = R[j] - 0.5 * k.delta;
       k.v_rel = vi - V[j] + (ai * wi + aj * W[j]).cross(k.n);
@@ -148,9 +148,9 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       F[j] -= c.force;
       ti += ai * arm_cross + MR[e];
       T[j] += aj * arm_cross - MR[e];
-      const double ratio = k.delta / std::min(ri, R[j]);
-      if (ratio > acc.max_overlap) {
-        acc.max_overlap = ratio;
+      const double rmin = std::min(ri, R[j]);
+      if (k.delta > acc.max_overlap * rmin) {  // divide only for a new maximum
+        acc.max_overlap = k.delta / rmin;
         acc.max_overlap_i = i;
       }
     }
