@@ -1,0 +1,39 @@
+#include "common.hpp"
+
+#include "db/store.hpp"
+#include "jobs/query.hpp"
+
+#include <iostream>
+
+namespace demcal::cli {
+
+void add_query(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("query", "One row per task: parameters and metrics");
+  struct Args {
+    std::string db = "demcal.db", job, format = "table";
+    std::vector<std::string> where, metrics;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--job", a->job, "only this job's tasks");
+  cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable");
+  cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated; default all)")->delimiter(',');
+  cmd->add_option("--format", a->format, "table, csv or json")->capture_default_str();
+  cmd->callback([a, &exit_code] {
+    exit_code = guarded("", [&] {
+      const jobs::Format format = jobs::parse_format(a->format);
+      std::vector<jobs::Where> where;
+      for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
+      require_db(a->db);
+      db::Store store(a->db, /*read_only=*/true);
+      if (!a->job.empty() && !store.find_job(a->job)) {
+        std::cerr << "demcal: error: --job: no job named \"" << a->job << "\"\n";
+        return kBadInput;
+      }
+      jobs::print_rows(std::cout, jobs::select_rows(store, a->job, where), a->metrics, format);
+      return kOk;
+    });
+  });
+}
+
+}  // namespace demcal::cli

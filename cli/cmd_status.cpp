@@ -1,0 +1,47 @@
+#include "common.hpp"
+
+#include "db/store.hpp"
+
+#include <iomanip>
+#include <iostream>
+
+namespace demcal::cli {
+
+void add_status(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("status", "Task counts per status, per job");
+  auto db = std::make_shared<std::string>("demcal.db");
+  auto job = std::make_shared<std::string>();
+  cmd->add_option("--db", *db, "SQLite database")->capture_default_str();
+  cmd->add_option("--job", *job, "only this job");
+  cmd->callback([db, job, &exit_code] {
+    exit_code = guarded("", [&] {
+      require_db(*db);
+      db::Store store(*db, /*read_only=*/true);
+      const db::StatusCounts counts = store.counts(*job);
+      if (!job->empty() && counts.empty()) {
+        std::cerr << "demcal: error: --job: no job named \"" << *job << "\"\n";
+        return kBadInput;
+      }
+      const char* statuses[] = {"pending", "running", "done", "failed"};
+      std::size_t w = 3;
+      for (const auto& [name, by] : counts) w = std::max(w, name.size());
+      std::cout << std::left << std::setw(static_cast<int>(w) + 2) << "job" << std::right;
+      for (const char* s : statuses) std::cout << std::setw(9) << s;
+      std::cout << std::setw(9) << "total" << "\n";
+      for (const auto& [name, by] : counts) {
+        int total = 0;
+        std::cout << std::left << std::setw(static_cast<int>(w) + 2) << name << std::right;
+        for (const char* s : statuses) {
+          const auto it = by.find(s);
+          const int n = it == by.end() ? 0 : it->second;
+          total += n;
+          std::cout << std::setw(9) << n;
+        }
+        std::cout << std::setw(9) << total << "\n";
+      }
+      return kOk;
+    });
+  });
+}
+
+}  // namespace demcal::cli

@@ -1,0 +1,27 @@
+#pragma once
+// What the subcommands share: exit codes, error reporting and where files live.
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+
+namespace demcal::cli {
+
+enum Exit { kOk = 0, kRuntime = 1, kBadInput = 2 };
+
+// Runs a subcommand body, mapping exceptions to a message on stderr and an exit
+// code: JobError and bad database files -> 2, everything else -> 1.
+int guarded(const std::string& context, const std::function<int()>& body);
+
+// The output directory: --out, or demcal-out/ next to the database.
+std::string default_out_dir(const std::string& db_path);
+// Throws JobError("--db") when the database does not exist (read-only commands).
+void require_db(const std::string& db_path);
+
+void add_validate(CLI::App& app, int& exit_code);
+void add_run(CLI::App& app, int& exit_code);
+void add_status(CLI::App& app, int& exit_code);
+void add_query(CLI::App& app, int& exit_code);
+void add_plot(CLI::App& app, int& exit_code);
+
+}  // namespace demcal::cli

@@ -1,0 +1,33 @@
+#include "grid.hpp"
+
+namespace demcal::jobs {
+
+std::uint64_t grid_size(const ParamSet& set, int replicas) {
+  const std::uint64_t cap = std::uint64_t(1) << 62;
+  std::uint64_t n = static_cast<std::uint64_t>(replicas);
+  for (const auto& a : set.axes) {
+    n *= a.values.size();
+    if (n > cap) return cap;
+  }
+  return n;
+}
+
+std::vector<nlohmann::json> expand(const ParamSet& set, int replicas, std::uint64_t seed) {
+  std::vector<nlohmann::json> out;
+  out.reserve(grid_size(set, replicas));
+  std::vector<std::size_t> at(set.axes.size(), 0);  // odometer over the axes
+  while (true) {
+    nlohmann::json p = set.base;
+    for (std::size_t i = 0; i < at.size(); ++i) p[set.axes[i].name] = set.axes[i].values[at[i]];
+    for (int r = 0; r < replicas; ++r) {
+      p["seed"] = seed + static_cast<std::uint64_t>(r);
+      out.push_back(p);
+    }
+    std::size_t k = at.size();
+    while (k > 0 && ++at[k - 1] == set.axes[k - 1].values.size()) at[--k] = 0;
+    if (k == 0) break;
+  }
+  return out;
+}
+
+}  // namespace demcal::jobs

@@ -1,0 +1,145 @@
+#include "hdf5_writer.hpp"
+
+#include "engine/particles.hpp"
+
+#include <H5Cpp.h>
+
+#include <algorithm>
+#include <sstream>
+#include <stdexcept>
+
+namespace demcal::jobs {
+namespace {
+
+void write_column(H5::Group& g, const std::string& name, const std::vector<double>& data) {
+  const hsize_t n = data.size();
+  H5::DataSpace space(1, &n);
+  H5::DSetCreatPropList props;
+  if (n > 0) {
+    const hsize_t chunk = std::min<hsize_t>(n, 4096);
+    props.setChunk(1, &chunk);
+    props.setShuffle();
+    props.setDeflate(4);
+  }
+  H5::DataSet ds = g.createDataSet(name, H5::PredType::NATIVE_DOUBLE, space, props);
+  if (n > 0) ds.write(data.data(), H5::PredType::NATIVE_DOUBLE);
+}
+
+void string_attr(H5::H5Object& obj, const std::string& name, const std::string& value) {
+  H5::StrType type(H5::PredType::C_S1, std::max<std::size_t>(1, value.size()));
+  H5::Attribute a = obj.createAttribute(name, type, H5::DataSpace(H5S_SCALAR));
+  a.write(type, value);
+}
+
+void double_attr(H5::H5Object& obj, const std::string& name, double value) {
+  H5::Attribute a = obj.createAttribute(name, H5::PredType::NATIVE_DOUBLE, H5::DataSpace(H5S_SCALAR));
+  a.write(H5::PredType::NATIVE_DOUBLE, &value);
+}
+
+std::string read_string_attr(const H5::H5Object& obj, const std::string& name) {
+  H5::Attribute a = obj.openAttribute(name);
+  std::string out;
+  a.read(a.getStrType(), out);
+  return out;
+}
+
+void write_series(H5::Group& root, const engine::Series& s) {
+  H5::Group g = root.createGroup(s.name);
+  std::string cols;
+  for (const auto& c : s.columns) cols += (cols.empty() ? "" : ",") + c;
+  string_attr(g, "columns", cols);
+  for (std::size_t c = 0; c < s.columns.size(); ++c) {
+    std::vector<double> col;
+    col.reserve(s.rows.size());
+    for (const auto& row : s.rows) col.push_back(c < row.size() ? row[c] : 0.0);
+    write_column(g, s.columns[c], col);
+  }
+}
+
+void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
+  H5::Group g = f.createGroup("Step#" + std::to_string(step));
+  double_attr(g, "TimeValue", s.time);
+  string_attr(g, "label", s.label.empty() ? "snapshot" : s.label);
+  write_column(g, "x", s.x);
+  write_column(g, "y", s.y);
+  write_column(g, "z", s.z);
+  write_column(g, "radius", s.radius);
+  write_column(g, "vx", s.vx);
+  write_column(g, "vy", s.vy);
+  write_column(g, "vz", s.vz);
+}
+
+}  // namespace
+
+void SnapshotObserver::on_snapshot(const std::string& label, double time, const engine::Particles& p) {
+  if (!keep_) return;
+  Snapshot s;
+  s.label = label;
+  s.time = time;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    s.x.push_back(p.x[i].x());
+    s.y.push_back(p.x[i].y());
+    s.z.push_back(p.x[i].z());
+    s.radius.push_back(p.r[i]);
+    s.vx.push_back(p.v[i].x());
+    s.vy.push_back(p.v[i].y());
+    s.vz.push_back(p.v[i].z());
+  }
+  snapshots.push_back(std::move(s));
+}
+
+void write_task_hdf5(const std::string& path, const nlohmann::json& params, const std::vector<engine::Series>& series,
+                     const std::vector<Snapshot>& snapshots) {
+  H5::Exception::dontPrint();
+  H5::H5File f(path, H5F_ACC_TRUNC);
+  string_attr(f, "params", params.dump());
+  H5::Group root = f.createGroup("series");
+  for (const auto& s : series) write_series(root, s);
+  for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);
+}
+
+engine::Series read_series(const std::string& path, const std::string& name) {
+  H5::Exception::dontPrint();
+  try {
+    H5::H5File f(path, H5F_ACC_RDONLY);
+    if (!f.nameExists("series/" + name)) throw std::runtime_error(path + " has no series \"" + name + "\"");
+    H5::Group g = f.openGroup("series/" + name);
+    engine::Series s;
+    s.name = name;
+    std::stringstream cols(read_string_attr(g, "columns"));
+    for (std::string c; std::getline(cols, c, ',');) s.columns.push_back(c);
+    std::vector<std::vector<double>> data;
+    for (const auto& c : s.columns) {
+      H5::DataSet ds = g.openDataSet(c);
+      hsize_t n = 0;
+      ds.getSpace().getSimpleExtentDims(&n);
+      std::vector<double> col(n);
+      if (n > 0) ds.read(col.data(), H5::PredType::NATIVE_DOUBLE);
+      data.push_back(std::move(col));
+    }
+    const std::size_t rows = data.empty() ? 0 : data[0].size();
+    for (std::size_t r = 0; r < rows; ++r) {
+      std::vector<double> row;
+      for (const auto& col : data) row.push_back(r < col.size() ? col[r] : 0.0);
+      s.rows.push_back(std::move(row));
+    }
+    return s;
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+  }
+}
+
+std::vector<std::string> series_names(const std::string& path) {
+  H5::Exception::dontPrint();
+  std::vector<std::string> out;
+  try {
+    H5::H5File f(path, H5F_ACC_RDONLY);
+    H5::Group g = f.openGroup("series");
+    for (hsize_t i = 0; i < g.getNumObjs(); ++i) out.push_back(g.getObjnameByIdx(i));
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+  }
+  return out;
+}
+
+}  // namespace demcal::jobs

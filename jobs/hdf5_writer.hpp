@@ -1,0 +1,39 @@
+#pragma once
+// Per-task HDF5 files: every time series as a group /series/<name> holding one
+// chunked, deflated 1-D dataset per column (the order is in the group's "columns"
+// attribute), the task parameters as the root attribute "params", and optional
+// particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz)
+// that ParaView's H5Part reader opens.
+#include "engine/observer.hpp"
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace demcal::jobs {
+
+struct Snapshot {
+  std::string label;
+  double time = 0;
+  std::vector<double> x, y, z, radius, vx, vy, vz;
+};
+
+// Collects snapshots from a running scene (only when asked for: they are big).
+class SnapshotObserver : public engine::Observer {
+ public:
+  explicit SnapshotObserver(bool keep) : keep_(keep) {}
+  void on_snapshot(const std::string& label, double time, const engine::Particles& p) override;
+  std::vector<Snapshot> snapshots;
+
+ private:
+  bool keep_;
+};
+
+void write_task_hdf5(const std::string& path, const nlohmann::json& params, const std::vector<engine::Series>& series,
+                     const std::vector<Snapshot>& snapshots);
+
+// Reads one series back (for plotting); throws std::runtime_error when absent.
+engine::Series read_series(const std::string& path, const std::string& name);
+std::vector<std::string> series_names(const std::string& path);
+
+}  // namespace demcal::jobs

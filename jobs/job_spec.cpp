@@ -1,0 +1,143 @@
+#include "job_spec.hpp"
+
+#include "grid.hpp"
+#include "job_error.hpp"
+#include "scene_registry.hpp"
+#include "task_key.hpp"
+#include "validate.hpp"
+
+#include <algorithm>
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+namespace demcal::jobs {
+namespace {
+
+const char* const kTopKeys[] = {"name", "description", "scene", "material", "grid",
+                                "replicas", "seed", "threads", "fidelity", "snapshots"};
+
+nlohmann::json parse_text(const std::string& text, const std::string& source) {
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    // nlohmann reports a byte offset; people want line and column.
+    std::size_t line = 1, col = 1;
+    for (std::size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
+      if (text[i] == '\n') {
+        ++line;
+        col = 1;
+      } else {
+        ++col;
+      }
+    }
+    std::string what = e.what();
+    const auto cut = what.find("parse error");
+    if (cut != std::string::npos) what = what.substr(cut);
+    throw JobError("", source + ":" + std::to_string(line) + ":" + std::to_string(col) + ": malformed JSON: " + what);
+  } catch (const nlohmann::json::exception& e) {
+    // e.g. a number too large for a double (1e999): not finite, so not accepted.
+    throw JobError("", source + ": malformed JSON: " + e.what() + " (numbers must be finite)");
+  }
+}
+
+std::string string_field(const nlohmann::json& j, const char* key, bool required) {
+  if (!j.contains(key)) {
+    if (required) throw JobError(key, "missing (required)");
+    return "";
+  }
+  if (!j.at(key).is_string()) throw JobError(key, "expected a string, got " + describe(j.at(key)));
+  return j.at(key).get<std::string>();
+}
+
+std::int64_t int_field(const nlohmann::json& j, const char* key, std::int64_t fallback, double lo, double hi) {
+  if (!j.contains(key)) return fallback;
+  ParamSpec s = int_param("", key, key, nullptr).at_least(lo).at_most(hi);
+  return check_scalar(s, j.at(key), key).get<std::int64_t>();
+}
+
+void check_top_keys(const nlohmann::json& j, const std::string& scene) {
+  std::vector<std::string> known(std::begin(kTopKeys), std::end(kTopKeys));
+  known.push_back(scene);
+  for (const auto& [k, v] : j.items()) {
+    if (std::find(known.begin(), known.end(), k) != known.end()) continue;
+    if (find_scene(k)) throw JobError(k, "section of scene \"" + k + "\", but this job's scene is \"" + scene + "\"");
+    const std::string guess = closest(k, known);
+    throw JobError(k, "unknown key" + (guess.empty() ? std::string() : " (did you mean \"" + guess + "\"?)"));
+  }
+}
+
+const SceneDef& scene_of(const nlohmann::json& j) {
+  const std::string name = string_field(j, "scene", true);
+  if (const SceneDef* s = find_scene(name)) return *s;
+  std::string all;
+  for (const auto& n : scene_names()) all += (all.empty() ? "\"" : ", \"") + n + "\"";
+  throw JobError("scene", "unknown or not yet available scene \"" + name + "\" (available: " + all + ")");
+}
+
+void read_settings(const nlohmann::json& j, Job& job) {
+  job.name = string_field(j, "name", true);
+  static const std::regex ok("[A-Za-z0-9][A-Za-z0-9._-]{0,99}");
+  if (!std::regex_match(job.name, ok))
+    throw JobError("name", "must be 1-100 characters of letters, digits, '.', '_' or '-', starting with a letter or digit");
+  string_field(j, "description", false);
+  job.replicas = static_cast<int>(int_field(j, "replicas", 1, 1, 10000));
+  job.seed = static_cast<std::uint64_t>(int_field(j, "seed", 1, 0, 9.0e15));
+  job.threads = static_cast<int>(int_field(j, "threads", 0, 1, 1024));
+  job.fidelity = j.contains("fidelity") ? string_field(j, "fidelity", false) : "standard";
+  if (job.fidelity != "quick" && job.fidelity != "standard" && job.fidelity != "reference")
+    throw JobError("fidelity", "expected one of \"quick\", \"standard\", \"reference\", got \"" + job.fidelity + "\"");
+  if (j.contains("snapshots")) {
+    if (!j.at("snapshots").is_boolean()) throw JobError("snapshots", "expected true or false, got " + describe(j.at("snapshots")));
+    job.snapshots = j.at("snapshots").get<bool>();
+  }
+}
+
+void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
+  const ParamSet set = read_params(j, scene);
+  for (const auto& a : set.axes) job.axes.push_back(a.name);
+  const std::uint64_t n = grid_size(set, job.replicas);
+  if (n > kMaxTasks)
+    throw JobError("grid", "expands to " + std::to_string(n) + " tasks, more than the limit of " + std::to_string(kMaxTasks));
+  std::vector<nlohmann::json> params = expand(set, job.replicas, job.seed);
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    try {
+      scene.resolve(params[i], job.fidelity);
+    } catch (const JobError& e) {
+      const std::string where = params.size() > 1 ? " (task " + std::to_string(i) + " of the grid)" : "";
+      throw JobError(e.path(), e.reason() + where);
+    }
+    Task t;
+    t.index = i;
+    t.key = task_key(scene.name, params[i]);
+    t.params = std::move(params[i]);
+    job.tasks.push_back(std::move(t));
+  }
+}
+
+}  // namespace
+
+Job parse_job(const std::string& text, const std::string& source) {
+  const nlohmann::json j = parse_text(text, source);
+  if (!j.is_object()) throw JobError("", source + ": the job must be a JSON object, got " + describe(j));
+  const SceneDef& scene = scene_of(j);
+  check_top_keys(j, scene.name);
+  Job job;
+  job.source = source;
+  job.spec = j;
+  job.scene = scene.name;
+  read_settings(j, job);
+  expand_tasks(j, scene, job);
+  return job;
+}
+
+Job load_job_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw JobError("", "cannot read job file " + path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw JobError("", "cannot read job file " + path);
+  return parse_job(text.str(), path);
+}
+
+}  // namespace demcal::jobs

@@ -1,0 +1,38 @@
+#include "material_params.hpp"
+
+namespace demcal::jobs {
+
+std::vector<ParamSpec> material_params() {
+  const engine::Material d;  // the engine's defaults are the job file's defaults
+  return {
+      real_param("material", "kn", "kn", d.kn).above(0),
+      real_param("material", "ks", "ks", d.ks).at_least(0),
+      real_param("material", "density", "density", d.density).above(0),
+      real_param("material", "b", "b", d.rolling_b).at_least(0),
+      real_param("material", "theta_deg", "theta_deg", 0.0).at_least(0).below(90),
+      real_param("material", "eta", "eta", d.rolling_eta).at_least(0),
+      real_param("material", "diameter.min", "d_min", d.d_min).above(0).at_most(1.0),
+      real_param("material", "diameter.max", "d_max", d.d_max).above(0).at_most(1.0),
+  };
+}
+
+engine::Material material_from(const nlohmann::json& p) {
+  engine::Material m;
+  m.kn = p.at("kn").get<double>();
+  m.ks = p.at("ks").get<double>();
+  m.density = p.at("density").get<double>();
+  m.rolling_b = p.at("b").get<double>();
+  m.friction_angle = engine::deg_to_rad(p.at("theta_deg").get<double>());
+  m.rolling_eta = p.at("eta").get<double>();
+  m.d_min = p.at("d_min").get<double>();
+  m.d_max = p.at("d_max").get<double>();
+  return m;
+}
+
+std::string job_path_of(const std::string& field, const std::string& section) {
+  if (field == "material.friction_angle") return "material.theta_deg";
+  if (field.rfind("numerics.", 0) == 0) return section + "." + field.substr(9);
+  return field;
+}
+
+}  // namespace demcal::jobs

@@ -1,0 +1,133 @@
+#include "params.hpp"
+
+#include "job_error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace demcal::jobs {
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+std::string range_text(const ParamSpec& s) {
+  const bool has_lo = std::isfinite(s.lo), has_hi = std::isfinite(s.hi);
+  if (has_lo && has_hi)
+    return std::string("in ") + (s.lo_open ? "(" : "[") + fmt(s.lo) + ", " + fmt(s.hi) + (s.hi_open ? ")" : "]");
+  if (has_lo) return (s.lo_open ? "> " : ">= ") + fmt(s.lo);
+  if (has_hi) return (s.hi_open ? "< " : "<= ") + fmt(s.hi);
+  return "";
+}
+
+void check_range(const ParamSpec& s, double v, const std::string& path) {
+  const bool low = s.lo_open ? !(v > s.lo) : !(v >= s.lo);
+  const bool high = s.hi_open ? !(v < s.hi) : !(v <= s.hi);
+  if (low || high) throw JobError(path, "must be " + range_text(s) + ", got " + fmt(v));
+}
+
+ParamSpec make(const std::string& section, const std::string& key, const std::string& name, ParamType t,
+               nlohmann::json fallback) {
+  ParamSpec s;
+  s.section = section;
+  s.key = key;
+  s.name = name;
+  s.type = t;
+  s.fallback = std::move(fallback);
+  return s;
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j)
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+}  // namespace
+
+ParamSpec real_param(const std::string& section, const std::string& key, const std::string& name,
+                     nlohmann::json fallback) {
+  return make(section, key, name, ParamType::real, std::move(fallback));
+}
+ParamSpec int_param(const std::string& section, const std::string& key, const std::string& name,
+                    nlohmann::json fallback) {
+  return make(section, key, name, ParamType::integer, std::move(fallback));
+}
+ParamSpec bool_param(const std::string& section, const std::string& key, const std::string& name, bool fallback) {
+  return make(section, key, name, ParamType::boolean, fallback);
+}
+ParamSpec choice_param(const std::string& section, const std::string& key, const std::string& name,
+                       std::vector<std::string> choices, nlohmann::json fallback) {
+  ParamSpec s = make(section, key, name, ParamType::choice, std::move(fallback));
+  s.choices = std::move(choices);
+  return s;
+}
+
+std::string describe(const nlohmann::json& v) {
+  switch (v.type()) {
+    case nlohmann::json::value_t::null: return "null";
+    case nlohmann::json::value_t::boolean: return std::string("the boolean ") + (v.get<bool>() ? "true" : "false");
+    case nlohmann::json::value_t::string: return "the string " + v.dump();
+    case nlohmann::json::value_t::array: return "a list";
+    case nlohmann::json::value_t::object: return "an object";
+    default: return "the number " + v.dump();
+  }
+}
+
+nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const std::string& path) {
+  switch (s.type) {
+    case ParamType::boolean:
+      if (!v.is_boolean()) throw JobError(path, "expected true or false, got " + describe(v));
+      return v;
+    case ParamType::choice: {
+      std::string all;
+      for (const auto& c : s.choices) all += (all.empty() ? "\"" : ", \"") + c + "\"";
+      if (!v.is_string()) throw JobError(path, "expected one of " + all + ", got " + describe(v));
+      if (std::find(s.choices.begin(), s.choices.end(), v.get<std::string>()) == s.choices.end())
+        throw JobError(path, "expected one of " + all + ", got " + v.dump());
+      return v;
+    }
+    case ParamType::integer: {
+      if (!v.is_number()) throw JobError(path, "expected an integer, got " + describe(v));
+      const double d = v.get<double>();
+      if (!std::isfinite(d)) throw JobError(path, "must be finite, got " + v.dump());
+      if (std::abs(d) > 9.0e15 || (v.is_number_float() && std::floor(d) != d))
+        throw JobError(path, "expected an integer, got " + v.dump());
+      check_range(s, d, path);
+      return v.is_number_float() ? nlohmann::json(static_cast<std::int64_t>(d)) : nlohmann::json(v.get<std::int64_t>());
+    }
+    case ParamType::real: {
+      if (!v.is_number()) throw JobError(path, "expected a number, got " + describe(v));
+      const double d = v.get<double>();
+      if (!std::isfinite(d)) throw JobError(path, "must be finite, got " + v.dump());
+      check_range(s, d, path);
+      return nlohmann::json(d);
+    }
+  }
+  return v;
+}
+
+std::string closest(const std::string& word, const std::vector<std::string>& candidates) {
+  std::string best;
+  std::size_t best_d = 3;  // more than two edits apart is not a typo
+  for (const auto& c : candidates) {
+    const std::size_t d = edit_distance(word, c);
+    if (d < best_d) {
+      best_d = d;
+      best = c;
+    }
+  }
+  return best;
+}
+
+}  // namespace demcal::jobs

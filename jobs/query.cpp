@@ -1,0 +1,212 @@
+#include "query.hpp"
+
+#include "job_error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iomanip>
+#include <set>
+
+namespace demcal::jobs {
+namespace {
+
+bool numbers_equal(double a, double b) { return a == b || std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)); }
+
+bool value_matches(const nlohmann::json& v, const std::string& want) {
+  if (v.is_boolean()) return want == (v.get<bool>() ? "true" : "false");
+  if (v.is_string()) return v.get<std::string>() == want;
+  if (v.is_number()) {
+    char* end = nullptr;
+    const double d = std::strtod(want.c_str(), &end);
+    return end && *end == '\0' && end != want.c_str() && numbers_equal(v.get<double>(), d);
+  }
+  return v.dump() == want;
+}
+
+nlohmann::json special(const db::TaskRow& t, const std::string& key) {
+  if (key == "status") return t.status;
+  if (key == "scene") return t.scene;
+  if (key == "task") return t.id;
+  return nullptr;
+}
+
+// Tables round to 6 digits for reading; CSV keeps every digit for further work.
+std::string num(double v, bool precise = false) {
+  if (std::isnan(v)) return "";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  if (precise) return nlohmann::json(v).dump();
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+std::string cell(const nlohmann::json& v, bool precise) {
+  if (v.is_null()) return "";
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_number_float()) return num(v.get<double>(), precise);
+  return v.dump();
+}
+
+std::string csv_escape(const std::string& s) {
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string out = "\"";
+  for (char c : s) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return out + "\"";
+}
+
+struct Table {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+};
+
+std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool varying_only) {
+  std::vector<std::string> keys;
+  for (const auto& r : rows)
+    for (const auto& [k, v] : r.params.items())
+      if (std::find(keys.begin(), keys.end(), k) == keys.end()) keys.push_back(k);
+  if (!varying_only || rows.size() < 2) return keys;
+  std::vector<std::string> out;
+  for (const auto& k : keys) {
+    std::set<std::string> seen;
+    for (const auto& r : rows) seen.insert(r.params.contains(k) ? r.params[k].dump() : "");
+    if (seen.size() > 1) out.push_back(k);
+  }
+  return out;
+}
+
+std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, const std::vector<std::string>& asked) {
+  if (!asked.empty()) return asked;
+  std::vector<std::string> out;
+  for (const auto& r : rows)
+    for (const auto& m : r.metrics)
+      if (std::find(out.begin(), out.end(), m.first) == out.end()) out.push_back(m.first);
+  return out;
+}
+
+double metric_of(const ResultRow& r, const std::string& name) {
+  for (const auto& m : r.metrics)
+    if (m.first == name) return m.second;
+  return NAN;
+}
+
+Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics, bool for_reading) {
+  const bool varying_only = for_reading, precise = !for_reading;
+  Table t;
+  const auto params = param_columns(rows, varying_only);
+  const auto mets = metric_columns(rows, metrics);
+  t.header = {"task", "job", "status"};
+  t.header.insert(t.header.end(), params.begin(), params.end());
+  t.header.insert(t.header.end(), mets.begin(), mets.end());
+  t.header.push_back("error");
+  for (const auto& r : rows) {
+    std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
+    for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
+    for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
+    line.push_back(r.task.error);
+    t.rows.push_back(std::move(line));
+  }
+  return t;
+}
+
+void print_table(std::ostream& out, const Table& t) {
+  std::vector<std::size_t> w(t.header.size());
+  for (std::size_t c = 0; c < w.size(); ++c) {
+    w[c] = t.header[c].size();
+    for (const auto& r : t.rows) w[c] = std::max(w[c], r[c].size());
+  }
+  auto line = [&](const std::vector<std::string>& cells) {
+    std::string s;
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      s += cells[c];
+      if (c + 1 < cells.size()) s += std::string(w[c] - cells[c].size() + 2, ' ');
+    }
+    while (!s.empty() && s.back() == ' ') s.pop_back();
+    out << s << "\n";
+  };
+  line(t.header);
+  for (const auto& r : t.rows) line(r);
+}
+
+nlohmann::json json_number(double v) {
+  if (std::isfinite(v)) return v;
+  return std::isnan(v) ? nlohmann::json(nullptr) : nlohmann::json(v > 0 ? "inf" : "-inf");
+}
+
+void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics) {
+  nlohmann::json arr = nlohmann::json::array();
+  const auto mets = metric_columns(rows, metrics);
+  for (const auto& r : rows) {
+    nlohmann::json m = nlohmann::json::object();
+    for (const auto& name : mets) m[name] = json_number(metric_of(r, name));
+    nlohmann::json o = {{"task", r.task.id},         {"job", r.task.job},     {"index", r.task.index},
+                        {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
+                        {"key", r.task.key},         {"params", r.params},    {"metrics", m},
+                        {"wall_s", json_number(r.task.wall_s)}};
+    if (!r.task.error.empty()) o["error"] = r.task.error;
+    arr.push_back(std::move(o));
+  }
+  out << arr.dump(2) << "\n";
+}
+
+}  // namespace
+
+Where parse_where(const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
+    throw JobError("--where", "expected KEY=VALUE, got \"" + text + "\"");
+  return Where{text.substr(0, eq), text.substr(eq + 1)};
+}
+
+std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where) {
+  std::vector<ResultRow> all;
+  for (auto& t : store.tasks(job)) {
+    ResultRow r;
+    r.params = nlohmann::json::parse(t.params_json, nullptr, false);
+    r.task = std::move(t);
+    all.push_back(std::move(r));
+  }
+  for (const auto& w : where) {
+    const bool known = special(db::TaskRow{}, w.key) != nullptr ||
+                       std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return r.params.contains(w.key); });
+    if (!known && !all.empty()) throw JobError("--where", "no task has a parameter \"" + w.key + "\"");
+  }
+  std::vector<ResultRow> out;
+  for (auto& r : all) {
+    bool ok = true;
+    for (const auto& w : where) {
+      nlohmann::json v = special(r.task, w.key);
+      if (v.is_null()) v = r.params.contains(w.key) ? r.params[w.key] : nlohmann::json();
+      ok = ok && !v.is_null() && value_matches(v, w.value);
+    }
+    if (!ok) continue;
+    r.metrics = store.metrics(r.task.id);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+Format parse_format(const std::string& text) {
+  if (text == "table") return Format::table;
+  if (text == "csv") return Format::csv;
+  if (text == "json") return Format::json;
+  throw JobError("--format", "expected table, csv or json, got \"" + text + "\"");
+}
+
+void print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
+                Format format) {
+  if (format == Format::json) return print_json(out, rows, metrics);
+  const Table t = build(rows, metrics, format == Format::table);
+  if (format == Format::table) return print_table(out, t);
+  for (const auto* line : {&t.header}) {
+    for (std::size_t c = 0; c < line->size(); ++c) out << (c ? "," : "") << csv_escape((*line)[c]);
+    out << "\n";
+  }
+  for (const auto& r : t.rows) {
+    for (std::size_t c = 0; c < r.size(); ++c) out << (c ? "," : "") << csv_escape(r[c]);
+    out << "\n";
+  }
+}
+
+}  // namespace demcal::jobs

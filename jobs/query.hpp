@@ -1,0 +1,37 @@
+#pragma once
+// Reading results back: one row per task with its parameters and metrics,
+// filtered by parameter values, printed as an aligned table, CSV or JSON.
+#include "db/store.hpp"
+
+#include <nlohmann/json.hpp>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace demcal::jobs {
+
+struct Where {
+  std::string key, value;
+};
+// "theta_deg=30" -> {theta_deg, 30}; throws JobError("--where", ...) when malformed.
+Where parse_where(const std::string& text);
+
+struct ResultRow {
+  db::TaskRow task;
+  nlohmann::json params;
+  std::vector<std::pair<std::string, double>> metrics;
+};
+
+// Keys: any task parameter, or status, scene, task (the id). Numbers compare as
+// numbers (30 matches 30.0), booleans as true/false. A key no task has is an error.
+std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where);
+
+enum class Format { table, csv, json };
+Format parse_format(const std::string& text);
+
+// metrics empty: every metric any row has. In table form only the parameters that
+// vary between rows are shown (all of them in CSV and JSON).
+void print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
+                Format format);
+
+}  // namespace demcal::jobs

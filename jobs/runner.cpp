@@ -1,0 +1,292 @@
+#include "runner.hpp"
+
+#include "liveness.hpp"
+#include "progress.hpp"
+#include "worker.hpp"
+
+#include <algorithm>
+#include <csignal>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+
+namespace demcal::jobs {
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void on_stop_signal(int sig) { g_stop = sig; }
+
+// Installs the SIGINT/SIGTERM handlers for the duration of a run.
+class SignalGuard {
+ public:
+  SignalGuard() {
+    g_stop = 0;
+    struct sigaction sa {};
+    sa.sa_handler = on_stop_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &old_int_);
+    sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~SignalGuard() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
+
+std::string signal_name(int sig) {
+  switch (sig) {
+    case SIGABRT: return "SIGABRT";
+    case SIGSEGV: return "SIGSEGV";
+    case SIGBUS: return "SIGBUS";
+    case SIGFPE: return "SIGFPE";
+    case SIGILL: return "SIGILL";
+    case SIGKILL: return "SIGKILL";
+    case SIGTERM: return "SIGTERM";
+    case SIGINT: return "SIGINT";
+    default: return "signal " + std::to_string(sig);
+  }
+}
+
+struct Running {
+  std::int64_t task_id;
+  std::size_t index;
+  pid_t pid;
+  std::string result_path;
+  std::chrono::steady_clock::time_point start;
+};
+
+class Runner {
+ public:
+  Runner(db::Store& store, const Job& job, const RunOptions& opt)
+      : store_(store), job_(job), opt_(opt), token_(runner_token()),
+        progress_(*opt.log, opt.terminal), dir_(std::filesystem::absolute(opt.out_dir) / job.name) {}
+
+  RunSummary run();
+
+ private:
+  void prepare();
+  void refill_queue();
+  void launch(const db::TaskRow& row);
+  void reap(bool stopping);
+  void handle_exit(const Running& r, int wstatus, bool stopping);
+  void stop_all();
+  Counts counts();
+  std::string describe_task(std::size_t index) const;
+  double eta() ;
+
+  db::Store& store_;
+  const Job& job_;
+  RunOptions opt_;
+  std::string token_;
+  Progress progress_;
+  std::filesystem::path dir_;
+  std::deque<db::TaskRow> queue_;
+  std::vector<Running> running_;
+  int workers_ = 1, threads_ = 1, ran_ = 0;
+  double busy_s_ = 0;  // summed wall time of tasks this run finished
+  Counts counts_;
+};
+
+void Runner::prepare() {
+  std::vector<db::NewTask> tasks;
+  for (const auto& t : job_.tasks) tasks.push_back({t.key, job_.scene, t.params.dump()});
+  const std::int64_t job_id = store_.put_job(job_.name, job_.spec.dump(), tasks);
+  if (int n = store_.requeue_dead(runner_alive))
+    *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
+  if (opt_.retry_failed)
+    if (int n = store_.reset_failed(job_id)) *opt_.log << "retrying " << n << " failed task(s)\n";
+  refill_queue();
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  workers_ = opt_.workers > 0 ? opt_.workers : cores;
+  const int todo = std::max<int>(1, static_cast<int>(queue_.size()));
+  // Fewer tasks than cores: give each task's engine the spare cores as threads.
+  // Otherwise one thread per task: the engine synchronises every step, and
+  // oversubscribed cores turn each barrier into a scheduler time slice.
+  const int parallel = std::min(workers_, todo);
+  threads_ = job_.threads > 0 ? job_.threads : (todo < cores ? std::max(1, cores / parallel) : 1);
+  std::filesystem::create_directories(dir_);
+}
+
+void Runner::refill_queue() {
+  queue_.clear();
+  for (auto& row : store_.tasks(job_.name))
+    if (row.status == "pending") queue_.push_back(std::move(row));
+}
+
+std::string Runner::describe_task(std::size_t index) const {
+  std::string s = "task #" + std::to_string(index);
+  if (index >= job_.tasks.size()) return s;
+  std::string axes;
+  for (const auto& a : job_.axes) axes += (axes.empty() ? "" : " ") + a + "=" + job_.tasks[index].params.at(a).dump();
+  if (job_.replicas > 1) axes += (axes.empty() ? "" : " ") + std::string("seed=") + job_.tasks[index].params.at("seed").dump();
+  return axes.empty() ? s : s + " (" + axes + ")";
+}
+
+void Runner::launch(const db::TaskRow& row) {
+  WorkerTask t;
+  t.task_id = row.id;
+  t.index = static_cast<std::size_t>(row.index);
+  t.scene = row.scene;
+  t.params = nlohmann::json::parse(row.params_json);
+  t.threads = threads_;
+  t.snapshots = job_.snapshots;
+  t.h5_path = (dir_ / (std::to_string(row.id) + ".h5")).string();
+  t.result_path = (dir_ / (".task-" + std::to_string(row.id) + ".result.json")).string();
+  std::filesystem::remove(t.result_path);
+  std::cout.flush();
+  std::cerr.flush();
+  std::fflush(nullptr);
+  const pid_t parent = getpid();
+  // fork() rather than re-exec: the child already holds the resolved task and the
+  // engine, nothing needs serialising, and start-up costs nothing. The child never
+  // uses the inherited SQLite connection and leaves with _exit().
+  const pid_t pid = fork();
+  if (pid < 0) {
+    store_.release(row.id, token_, "fork failed");
+    throw std::runtime_error("fork failed");
+  }
+  if (pid == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);  // a runner killed with -9 takes its workers along
+    if (getppid() != parent) _exit(4);
+    signal(SIGINT, SIG_IGN);  // the parent decides what an interrupt means
+    signal(SIGTERM, SIG_DFL);
+    _exit(run_worker(t));
+  }
+  store_.set_pid(row.id, pid);
+  running_.push_back(Running{row.id, t.index, pid, t.result_path, std::chrono::steady_clock::now()});
+  progress_.line(describe_task(t.index) + " started (task id " + std::to_string(row.id) + ")", counts());
+}
+
+Counts Runner::counts() {
+  Counts c;
+  for (const auto& [job, by_status] : store_.counts(job_.name))
+    for (const auto& [status, n] : by_status) {
+      c.total += n;
+      if (status == "done") c.done += n;
+      if (status == "failed") c.failed += n;
+      if (status == "running") c.running += n;
+    }
+  counts_ = c;
+  return c;
+}
+
+double Runner::eta() {
+  if (ran_ == 0) return -1;
+  const double per_task = busy_s_ / ran_;
+  const int left = counts_.total - counts_.done - counts_.failed;
+  return per_task * left / std::max(1, std::min(workers_, left));
+}
+
+void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - r.start).count();
+  std::optional<db::Outcome> out;
+  if (WIFEXITED(wstatus) && WEXITSTATUS(wstatus) == 0) out = read_worker_result(r.result_path);
+  std::filesystem::remove(r.result_path);
+  if (!out && stopping) {
+    store_.release(r.task_id, token_, "interrupted; will be retried");
+    progress_.line(describe_task(r.index) + " interrupted, back in the queue", counts());
+    return;
+  }
+  if (!out) {
+    out = db::Outcome{};
+    out->status = "failed";
+    out->wall_s = wall;
+    out->error = WIFSIGNALED(wstatus) ? "worker killed by " + signal_name(WTERMSIG(wstatus))
+                                      : "worker exited with status " + std::to_string(WEXITSTATUS(wstatus)) +
+                                            " without a result";
+  }
+  store_.finish(r.task_id, token_, *out);
+  ++ran_;
+  busy_s_ += out->wall_s;
+  std::ostringstream msg;
+  msg << describe_task(r.index) << " " << out->status << " in " << format_duration(out->wall_s);
+  if (!out->error.empty()) msg << ": " << out->error;
+  progress_.line(msg.str(), counts());
+}
+
+void Runner::reap(bool stopping) {
+  for (std::size_t i = 0; i < running_.size();) {
+    int st = 0;
+    const pid_t w = waitpid(running_[i].pid, &st, stopping ? 0 : WNOHANG);
+    if (w == running_[i].pid) {
+      const Running r = running_[i];
+      running_.erase(running_.begin() + static_cast<std::ptrdiff_t>(i));
+      handle_exit(r, st, stopping);
+    } else {
+      ++i;
+    }
+  }
+}
+
+void Runner::stop_all() {
+  for (const auto& r : running_) kill(r.pid, SIGTERM);
+  reap(/*stopping=*/true);  // a worker that finished meanwhile still has its result kept
+}
+
+RunSummary Runner::run() {
+  SignalGuard guard;
+  prepare();
+  RunSummary s;
+  const Counts start = counts();
+  s.reused = start.done;
+  if (start.done > 0)
+    *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
+  auto last_refresh = std::chrono::steady_clock::now();
+  while (!g_stop) {
+    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !g_stop) {
+      const db::TaskRow row = queue_.front();
+      queue_.pop_front();
+      if (store_.claim(row.id, token_)) launch(row);
+    }
+    reap(false);
+    const bool idle = running_.empty() && queue_.empty();
+    const auto now = std::chrono::steady_clock::now();
+    if (idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
+      last_refresh = now;
+      store_.requeue_dead(runner_alive);
+      refill_queue();
+      const Counts c = counts();
+      if (queue_.empty() && running_.empty() && c.running == 0) break;  // all done or failed
+      if (queue_.empty() && running_.empty()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));  // another runner holds the rest
+        continue;
+      }
+    }
+    progress_.update(counts_, eta());
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  if (g_stop) {
+    *opt_.log << "\n" << (g_stop == SIGINT ? "interrupted" : "terminated") << ": stopping " << running_.size()
+              << " running task(s); they will be retried by the next run\n";
+    stop_all();
+    s.interrupted = true;
+  }
+  progress_.finish();
+  const Counts c = counts();
+  s.total = c.total;
+  s.done = c.done;
+  s.failed = c.failed;
+  s.unfinished = c.total - c.done - c.failed;
+  s.ran = ran_;
+  return s;
+}
+
+}  // namespace
+
+RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options) {
+  RunOptions opt = options;
+  if (!opt.log) opt.log = &std::cerr;
+  Runner r(store, job, opt);
+  return r.run();
+}
+
+}  // namespace demcal::jobs

@@ -1,0 +1,41 @@
+#pragma once
+// Scene dispatch: a scene name maps to its parameter table, the resolution of one
+// task's parameters into a checked engine config, and a run. Each scene lives in
+// one file, jobs/scenes/<name>.cpp, defining scene_<name>(); CMake lists them.
+#include "params.hpp"
+
+#include "engine/observer.hpp"
+#include "engine/scenes/scene_status.hpp"
+
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace demcal::jobs {
+
+struct RunContext {
+  int threads = 1;
+  engine::Observer* observer = nullptr;
+};
+
+struct SceneOutput {
+  engine::SceneOutcome outcome;
+  engine::Metrics metrics;  // empty when the outcome is not ok
+  std::vector<engine::Series> series;
+};
+
+struct SceneDef {
+  std::string name;  // also the job-file section holding its protocol
+  std::vector<ParamSpec> params;  // material and scene section
+  // Fills derived defaults (e.g. from fidelity) into one task's flat parameters and
+  // checks what single fields cannot (relations, the engine's own validation).
+  // Throws JobError naming the job-file path.
+  std::function<void(nlohmann::json& params, const std::string& fidelity)> resolve;
+  std::function<SceneOutput(const nlohmann::json& params, const RunContext& ctx)> run;
+};
+
+const SceneDef* find_scene(const std::string& name);
+std::vector<std::string> scene_names();
+
+}  // namespace demcal::jobs

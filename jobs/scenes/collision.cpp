@@ -1,0 +1,91 @@
+// The elastic collision scene (seed Sec. 2.2.2): the time-step test.
+#include "../job_error.hpp"
+#include "../material_params.hpp"
+#include "../scene_registry.hpp"
+
+#include "engine/errors.hpp"
+#include "engine/scenes/collision.hpp"
+
+#include <algorithm>
+
+namespace demcal::jobs {
+namespace {
+
+const char* const kSection = "collision";
+
+std::vector<ParamSpec> collision_params() {
+  std::vector<ParamSpec> p = material_params();
+  const engine::CollisionConfig d;
+  p.push_back(int_param(kSection, "particles", "particles", static_cast<std::int64_t>(d.particles)).at_least(2).at_most(5e6));
+  p.push_back(real_param(kSection, "solid_fraction", "solid_fraction", d.solid_fraction).above(0).at_most(0.4));
+  p.push_back(real_param(kSection, "velocity_max", "velocity_max", d.velocity_max).above(0).at_most(1e4));
+  // steps, sample_every, dt and dt_factor have no fixed default: resolve() picks them.
+  p.push_back(int_param(kSection, "steps", "steps", nullptr).at_least(1).at_most(1e12));
+  p.push_back(int_param(kSection, "sample_every", "sample_every", nullptr).at_least(1).at_most(1e12));
+  p.push_back(real_param(kSection, "dt", "dt", nullptr).above(0).below(1));
+  p.push_back(real_param(kSection, "dt_factor", "dt_factor", nullptr).above(0).at_most(10));
+  p.push_back(bool_param(kSection, "keep_friction", "keep_friction", d.keep_friction));
+  p.push_back(bool_param(kSection, "allow_unstable_dt", "allow_unstable_dt", d.allow_unstable_dt));
+  return p;
+}
+
+engine::CollisionConfig config_from(const nlohmann::json& p) {
+  engine::CollisionConfig c;
+  c.material = material_from(p);
+  c.particles = p.at("particles").get<std::size_t>();
+  c.solid_fraction = p.at("solid_fraction").get<double>();
+  c.velocity_max = p.at("velocity_max").get<double>();
+  c.steps = p.at("steps").get<long>();
+  c.sample_every = p.at("sample_every").get<long>();
+  c.dt = p.value("dt", 0.0);
+  if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
+  c.keep_friction = p.at("keep_friction").get<bool>();
+  c.allow_unstable_dt = p.at("allow_unstable_dt").get<bool>();
+  c.seed = p.at("seed").get<std::uint64_t>();
+  return c;
+}
+
+// Step counts per fidelity, when the job gives none. Provisional until the
+// fidelity study fixes them (design section 9).
+std::int64_t default_steps(const std::string& fidelity) {
+  if (fidelity == "quick") return 20000;
+  if (fidelity == "reference") return 1000000;
+  return 200000;
+}
+
+void resolve(nlohmann::json& p, const std::string& fidelity) {
+  if (p.contains("dt") && p.contains("dt_factor"))
+    throw JobError("collision.dt", "give dt or dt_factor, not both");
+  if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", 0.2));
+  if (!p.contains("steps")) p["steps"] = default_steps(fidelity);
+  const auto steps = p["steps"].get<std::int64_t>();
+  if (!p.contains("sample_every")) p["sample_every"] = std::max<std::int64_t>(1, steps / 200);
+  if (p["sample_every"].get<std::int64_t>() > steps)
+    throw JobError("collision.sample_every", "must not exceed collision.steps (" + std::to_string(steps) + ")");
+  if (p["d_min"].get<double>() > p["d_max"].get<double>())
+    throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
+  try {
+    config_from(p).validate();
+  } catch (const engine::ConfigError& e) {
+    std::string reason = e.what();
+    reason = reason.substr(std::min(reason.size(), e.field().size() + 2));
+    throw JobError(job_path_of(e.field(), kSection), reason);
+  }
+}
+
+SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
+  engine::CollisionConfig c = config_from(p);
+  c.threads = ctx.threads;
+  engine::CollisionResult r = engine::run_collision(c, ctx.observer);
+  SceneOutput out;
+  out.outcome = r.outcome;
+  if (r.outcome.ok()) out.metrics = r.metrics();
+  out.series.push_back(std::move(r.energy));
+  return out;
+}
+
+}  // namespace
+
+SceneDef scene_collision() { return SceneDef{kSection, collision_params(), resolve, run}; }
+
+}  // namespace demcal::jobs

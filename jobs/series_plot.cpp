@@ -1,0 +1,106 @@
+#include "series_plot.hpp"
+
+#include "hdf5_writer.hpp"
+#include "job_error.hpp"
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace demcal::jobs {
+namespace {
+
+// gnuplot single-quoted string: a quote is written twice.
+std::string quoted(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string extension_of(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+std::string terminal_line(const std::string& ext) {
+  if (ext == ".svg") return "set terminal svg size 900,600 dynamic enhanced\n";
+  return "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) { set terminal pngcairo size 900,600 } "
+         "else { set terminal png size 900,600 }\n";
+}
+
+// Runs gnuplot on a script file without a shell, so no path is ever interpreted.
+void run_gnuplot(const std::string& script) {
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
+  if (pid == 0) {
+    execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  int st = 0;
+  waitpid(pid, &st, 0);
+  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
+  if (WEXITSTATUS(st) != 0) throw std::runtime_error("gnuplot failed (exit status " + std::to_string(WEXITSTATUS(st)) + ")");
+}
+
+}  // namespace
+
+void plot_series(const PlotRequest& r) {
+  const std::string ext = extension_of(r.out);
+  if (ext != ".png" && ext != ".svg") throw JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
+  engine::Series s;
+  try {
+    s = read_series(r.h5_path, r.series);
+  } catch (const std::runtime_error& e) {
+    std::string names;
+    try {
+      for (const auto& n : series_names(r.h5_path)) names += (names.empty() ? "" : ", ") + n;
+    } catch (const std::runtime_error&) {
+    }
+    throw JobError("--series", std::string(e.what()) + (names.empty() ? "" : " (available: " + names + ")"));
+  }
+  std::string cols;
+  for (const auto& c : s.columns) cols += (cols.empty() ? "" : ", ") + c;
+  auto col_index = [&](const std::string& c, const char* opt) {
+    for (std::size_t i = 0; i < s.columns.size(); ++i)
+      if (s.columns[i] == c) return i + 1;  // gnuplot counts from 1
+    throw JobError(opt, "series \"" + r.series + "\" has no column \"" + c + "\" (columns: " + cols + ")");
+  };
+  const std::size_t xi = col_index(r.x, "--x");
+  std::vector<std::size_t> yi;
+  for (const auto& y : r.y) yi.push_back(col_index(y, "--y"));
+  if (yi.empty()) throw JobError("--y", "give at least one column");
+
+  const auto tmp = std::filesystem::temp_directory_path() / ("demcal-plot-" + std::to_string(getpid()));
+  std::filesystem::create_directories(tmp);
+  const std::string data = (tmp / "data.txt").string(), script = (tmp / "plot.gp").string();
+  {
+    std::ofstream d(data);
+    d.precision(17);
+    for (const auto& row : s.rows) {
+      for (std::size_t i = 0; i < row.size(); ++i) d << (i ? " " : "") << row[i];
+      d << "\n";
+    }
+    std::ofstream g(script);
+    g << terminal_line(ext) << "set output " << quoted(r.out) << "\n"
+      << "set title " << quoted(r.title.empty() ? r.series : r.title) << " noenhanced\n"
+      << "set xlabel " << quoted(r.x) << " noenhanced\nset key noenhanced\nset grid\n";
+    g << "plot ";
+    for (std::size_t i = 0; i < yi.size(); ++i)
+      g << (i ? ", " : "") << quoted(data) << " using " << xi << ":" << yi[i] << " with lines title " << quoted(r.y[i]);
+    g << "\n";
+  }
+  try {
+    run_gnuplot(script);
+  } catch (...) {
+    std::filesystem::remove_all(tmp);
+    throw;
+  }
+  std::filesystem::remove_all(tmp);
+}
+
+}  // namespace demcal::jobs

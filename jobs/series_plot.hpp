@@ -1,0 +1,21 @@
+#pragma once
+// Draws columns of a task's stored time series with gnuplot, to PNG or SVG.
+#include <string>
+#include <vector>
+
+namespace demcal::jobs {
+
+struct PlotRequest {
+  std::string h5_path;  // the task's HDF5 file
+  std::string series;   // e.g. "energy"
+  std::string x;        // column for the x axis
+  std::vector<std::string> y;  // one line per column
+  std::string out;      // .png or .svg
+  std::string title;
+};
+
+// Throws JobError for bad input (unknown series or column, wrong extension) and
+// std::runtime_error when gnuplot cannot be run or fails.
+void plot_series(const PlotRequest& request);
+
+}  // namespace demcal::jobs

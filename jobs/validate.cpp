@@ -1,0 +1,118 @@
+#include "validate.hpp"
+
+#include "job_error.hpp"
+
+#include <algorithm>
+
+namespace demcal::jobs {
+namespace {
+
+const ParamSpec* spec_at(const SceneDef& scene, const std::string& section, const std::string& key) {
+  for (const auto& s : scene.params)
+    if (s.section == section && s.key == key) return &s;
+  return nullptr;
+}
+
+const ParamSpec* spec_named(const SceneDef& scene, const std::string& name) {
+  for (const auto& s : scene.params)
+    if (s.name == name) return &s;
+  return nullptr;
+}
+
+bool is_group(const SceneDef& scene, const std::string& section, const std::string& key) {
+  for (const auto& s : scene.params)
+    if (s.section == section && s.key.rfind(key + ".", 0) == 0) return true;
+  return false;
+}
+
+std::vector<std::string> keys_in(const SceneDef& scene, const std::string& section, const std::string& prefix) {
+  std::vector<std::string> out;
+  for (const auto& s : scene.params) {
+    if (s.section != section || s.key.rfind(prefix, 0) != 0) continue;
+    const std::string rest = s.key.substr(prefix.size());
+    out.push_back(rest.substr(0, rest.find('.')));
+  }
+  return out;
+}
+
+std::string unknown_key_reason(const std::string& key, const std::vector<std::string>& known) {
+  std::string reason = "unknown key";
+  const std::string guess = closest(key, known);
+  if (!guess.empty()) return reason + " (did you mean \"" + guess + "\"?)";
+  std::string all;
+  for (const auto& k : known)
+    if (all.find("\"" + k + "\"") == std::string::npos) all += (all.empty() ? "\"" : ", \"") + k + "\"";
+  return reason + " (expected one of " + all + ")";
+}
+
+std::vector<nlohmann::json> check_list(const ParamSpec& spec, const nlohmann::json& list, const std::string& path) {
+  if (list.empty()) throw JobError(path, "empty list: give at least one value");
+  std::vector<nlohmann::json> values;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string at = path + "[" + std::to_string(i) + "]";
+    if (list[i].is_array()) throw JobError(at, "nested lists are not allowed");
+    nlohmann::json v = check_scalar(spec, list[i], at);
+    for (std::size_t j = 0; j < values.size(); ++j)
+      if (values[j] == v) throw JobError(at, "duplicate value " + v.dump() + " (also at [" + std::to_string(j) + "])");
+    values.push_back(std::move(v));
+  }
+  return values;
+}
+
+void read_value(const ParamSpec& spec, const nlohmann::json& v, const std::string& path, ParamSet& out) {
+  if (v.is_array()) {
+    out.axes.push_back(Axis{spec.name, path, check_list(spec, v, path)});
+  } else {
+    out.base[spec.name] = check_scalar(spec, v, path);
+  }
+}
+
+void read_object(const SceneDef& scene, const std::string& section, const std::string& prefix,
+                 const nlohmann::json& obj, ParamSet& out) {
+  const std::string here = prefix.empty() ? section : section + "." + prefix;
+  if (!obj.is_object()) throw JobError(here, "expected an object, got " + describe(obj));
+  for (const auto& [k, v] : obj.items()) {
+    const std::string key = prefix.empty() ? k : prefix + "." + k;
+    const std::string path = section + "." + key;
+    if (const ParamSpec* spec = spec_at(scene, section, key)) {
+      read_value(*spec, v, path, out);
+    } else if (is_group(scene, section, key)) {
+      read_object(scene, section, key, v, out);
+    } else {
+      throw JobError(path, unknown_key_reason(k, keys_in(scene, section, prefix.empty() ? "" : prefix + ".")));
+    }
+  }
+}
+
+void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out) {
+  if (!grid.is_object()) throw JobError("grid", "expected an object of parameter -> list, got " + describe(grid));
+  std::vector<std::string> names;
+  for (const auto& s : scene.params) names.push_back(s.name);
+  for (const auto& [k, v] : grid.items()) {
+    const std::string path = "grid." + k;
+    const ParamSpec* spec = spec_named(scene, k);
+    if (!spec) throw JobError(path, "unknown parameter for scene \"" + scene.name + "\"" +
+                                        (closest(k, names).empty() ? "" : " (did you mean \"" + closest(k, names) + "\"?)"));
+    if (!v.is_array()) throw JobError(path, "expected a list of values, got " + describe(v));
+    for (const auto& a : out.axes)
+      if (a.name == k) throw JobError(path, "also given as a list at " + a.path);
+    out.base.erase(k);  // the grid overrides the base value
+    out.axes.push_back(Axis{k, path, check_list(*spec, v, path)});
+  }
+}
+
+}  // namespace
+
+ParamSet read_params(const nlohmann::json& job, const SceneDef& scene) {
+  ParamSet out;
+  for (const std::string& section : {std::string("material"), scene.name})
+    if (job.contains(section)) read_object(scene, section, "", job.at(section), out);
+  if (job.contains("grid")) read_grid(scene, job.at("grid"), out);
+  for (const auto& s : scene.params) {
+    const bool is_axis = std::any_of(out.axes.begin(), out.axes.end(), [&](const Axis& a) { return a.name == s.name; });
+    if (!is_axis && !out.base.contains(s.name) && !s.fallback.is_null()) out.base[s.name] = check_scalar(s, s.fallback, s.path());
+  }
+  return out;
+}
+
+}  // namespace demcal::jobs

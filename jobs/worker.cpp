@@ -1,0 +1,98 @@
+#include "worker.hpp"
+
+#include "hdf5_writer.hpp"
+#include "scene_registry.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+namespace demcal::jobs {
+namespace {
+
+// JSON has no inf or NaN; a diverged drift is a legitimate value, so spell it out.
+nlohmann::json encode(double v) {
+  if (std::isfinite(v)) return v;
+  if (std::isnan(v)) return "nan";
+  return v > 0 ? "inf" : "-inf";
+}
+double decode(const nlohmann::json& v) {
+  if (v.is_number()) return v.get<double>();
+  const std::string s = v.get<std::string>();
+  if (s == "inf") return INFINITY;
+  if (s == "-inf") return -INFINITY;
+  return NAN;
+}
+
+void test_abort_hook(std::size_t index) {
+  const char* env = std::getenv("DEMCAL_TEST_ABORT_TASK");
+  if (env && *env && std::to_string(index) == env) std::abort();
+}
+
+nlohmann::json run_scene(const WorkerTask& t) {
+  nlohmann::json out;
+  const SceneDef* scene = find_scene(t.scene);
+  if (!scene) throw std::runtime_error("unknown scene " + t.scene);
+  SnapshotObserver obs(t.snapshots);
+  const SceneOutput r = scene->run(t.params, RunContext{t.threads, &obs});
+  write_task_hdf5(t.h5_path, t.params, r.series, obs.snapshots);
+  out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
+  nlohmann::json metrics = nlohmann::json::array();
+  for (const auto& [name, value] : r.metrics) metrics.push_back({name, encode(value)});
+  out["metrics"] = metrics;
+  if (r.outcome.ok()) {
+    out["status"] = "done";
+  } else {
+    out["status"] = "failed";
+    out["error"] = std::string(engine::to_string(r.outcome.status)) + " in stage " + r.outcome.failed_stage + ": " +
+                   r.outcome.message;
+  }
+  return out;
+}
+
+}  // namespace
+
+int run_worker(const WorkerTask& t) {
+  test_abort_hook(t.index);
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json out;
+  try {
+    out = run_scene(t);
+  } catch (const std::exception& e) {
+    out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
+           {"artifacts", nlohmann::json::array()}};
+  }
+  out["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string tmp = t.result_path + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::trunc);
+    f << out.dump();
+    if (!f) return 3;
+  }
+  // rename is atomic: the parent sees a whole result or none.
+  return std::rename(tmp.c_str(), t.result_path.c_str()) == 0 ? 0 : 3;
+}
+
+std::optional<db::Outcome> read_worker_result(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) return std::nullopt;
+  try {
+    std::stringstream text;
+    text << f.rdbuf();
+    const nlohmann::json j = nlohmann::json::parse(text.str());
+    db::Outcome o;
+    o.status = j.at("status").get<std::string>();
+    o.error = j.value("error", "");
+    o.wall_s = j.at("wall_s").get<double>();
+    for (const auto& m : j.at("metrics")) o.metrics.emplace_back(m.at(0).get<std::string>(), decode(m.at(1)));
+    for (const auto& a : j.at("artifacts")) o.artifacts.emplace_back(a.at(0).get<std::string>(), a.at(1).get<std::string>());
+    return o;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+}  // namespace demcal::jobs

@@ -1,0 +1,36 @@
+#pragma once
+// What a worker process does: run one task's scene, write its HDF5 file and leave
+// the outcome in a small result file that the parent commits to the store. The
+// worker never touches the database: only the runner's parent process writes it.
+#include "db/store.hpp"
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+namespace demcal::jobs {
+
+struct WorkerTask {
+  std::int64_t task_id = 0;
+  std::size_t index = 0;  // position in the job's expansion (for the test hook)
+  std::string scene;
+  nlohmann::json params;
+  int threads = 1;
+  bool snapshots = false;
+  std::string h5_path;
+  std::string result_path;
+};
+
+// Runs the task and writes result_path (atomically, via rename). Returns the
+// process exit status to use: 0 when a result was written.
+//
+// Test-only hook: if the environment variable DEMCAL_TEST_ABORT_TASK equals the
+// task's index, the worker calls abort() first, to test that a crashing worker
+// fails its task only.
+int run_worker(const WorkerTask& task);
+
+// The result a worker left, or nullopt when there is none or it is unreadable.
+std::optional<db::Outcome> read_worker_result(const std::string& path);
+
+}  // namespace demcal::jobs

@@ -1,0 +1,104 @@
+#pragma once
+// Helpers for running the demcal binary from tests.
+#include "db/store.hpp"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+namespace demcal::test {
+
+namespace fs = std::filesystem;
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path = fs::temp_directory_path() /
+           ("demcal-cli-" + std::to_string(getpid()) + "-" + info->test_suite_name() + "-" + info->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  std::string file(const std::string& n) const { return (path / n).string(); }
+};
+
+inline std::string slurp(const std::string& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+inline void write(const std::string& p, const std::string& text) { std::ofstream(p, std::ios::trunc) << text; }
+
+// Starts demcal with args (stdout/stderr to files in dir); returns the pid.
+inline pid_t spawn(const std::vector<std::string>& args, const std::string& dir,
+                   const std::map<std::string, std::string>& env = {}, const std::string& tag = "out") {
+  const std::string out = dir + "/" + tag + ".stdout", err = dir + "/" + tag + ".stderr";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(o, 1);
+    dup2(e, 2);
+    for (const auto& [k, v] : env) setenv(k.c_str(), v.c_str(), 1);
+    if (chdir(dir.c_str()) != 0) _exit(126);
+    std::vector<char*> argv;
+    argv.push_back(const_cast<char*>(DEMCAL_BIN));
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(DEMCAL_BIN, argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+struct Result {
+  int rc = -1;
+  std::string out, err;
+};
+
+inline Result finish(pid_t pid, const std::string& dir, const std::string& tag = "out") {
+  int st = 0;
+  waitpid(pid, &st, 0);
+  Result r;
+  r.rc = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+  r.out = slurp(dir + "/" + tag + ".stdout");
+  r.err = slurp(dir + "/" + tag + ".stderr");
+  return r;
+}
+
+inline Result run_demcal(const std::vector<std::string>& args, const std::string& dir,
+                     const std::map<std::string, std::string>& env = {}) {
+  return finish(spawn(args, dir, env), dir);
+}
+
+// A small collision job: `n` tasks over dt_factor; `particles` x `steps` sets the cost.
+inline std::string collision_job(const std::string& name, const std::vector<double>& factors, int particles = 30,
+                                 int steps = 400) {
+  nlohmann::json j = {{"name", name},
+                      {"scene", "collision"},
+                      {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
+                      {"collision", {{"particles", particles}, {"steps", steps}, {"sample_every", 20}}},
+                      {"grid", {{"dt_factor", factors}}},
+                      {"seed", 1},
+                      {"threads", 1}};  // tests share the machine: no engine threads
+  return j.dump(2);
+}
+
+inline std::vector<db::TaskRow> tasks_of(const std::string& db, const std::string& job = "") {
+  db::Store s(db, true);
+  return s.tasks(job);
+}
+
+}  // namespace demcal::test

@@ -1,0 +1,133 @@
+#include "cli_util.hpp"
+
+using namespace demcal::test;
+using nlohmann::json;
+
+TEST(Cli, HelpOnEverySubcommand) {
+  TempDir d;
+  for (const char* cmd : {"validate", "run", "status", "query", "plot"}) {
+    const Result r = run_demcal({cmd, "--help"}, d.path.string());
+    EXPECT_EQ(r.rc, 0) << cmd;
+    EXPECT_NE(r.out.find("Usage"), std::string::npos) << cmd << r.out;
+  }
+  EXPECT_EQ(run_demcal({}, d.path.string()).rc, 2);
+  EXPECT_EQ(run_demcal({"run"}, d.path.string()).rc, 2);
+  EXPECT_EQ(run_demcal({"frobnicate"}, d.path.string()).rc, 2);
+}
+
+TEST(Cli, ValidatePrintsCountAndFirstTask) {
+  TempDir d;
+  const Result r = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("4 task(s)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"dt_factor\": 0.05"), std::string::npos) << r.out;
+  EXPECT_TRUE(fs::is_empty(d.path / "out.stderr"));
+}
+
+TEST(Cli, ValidateRejectsBadJobsNamingTheField) {
+  TempDir d;
+  write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "collision": {"partcles": 10}})");
+  Result r = run_demcal({"validate", "bad.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("collision.partcles"), std::string::npos) << r.err;
+  r = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/table-2-2.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);  // the triaxial scene is not registered yet
+  EXPECT_NE(r.err.find("scene"), std::string::npos) << r.err;
+  r = run_demcal({"validate", "missing.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("missing.json"), std::string::npos) << r.err;
+}
+
+TEST(Cli, InvalidJobWritesNothing) {
+  TempDir d;
+  write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "material": {"theta_deg": 90}})");
+  const Result r = run_demcal({"run", "bad.json", "--db", "x.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("material.theta_deg"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("x.db")));
+  EXPECT_FALSE(fs::exists(d.file("demcal-out")));
+}
+
+TEST(Cli, RunQueryStatusAndResume) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("small", {0.05, 0.1, 0.2}));
+  Result r = run_demcal({"run", "j.json", "--workers", "2"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("drift_per_million_steps"), std::string::npos) << r.out;
+  const auto before = tasks_of(d.file("demcal.db"), "small");
+  ASSERT_EQ(before.size(), 3u);
+  for (const auto& t : before) {
+    EXPECT_EQ(t.status, "done");
+    EXPECT_TRUE(fs::exists(d.path / "demcal-out" / "small" / (std::to_string(t.id) + ".h5")));
+  }
+
+  r = run_demcal({"query", "--job", "small", "--where", "dt_factor=0.1", "--format", "json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json rows = json::parse(r.out);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_DOUBLE_EQ(rows[0]["params"]["dt_factor"].get<double>(), 0.1);
+  EXPECT_TRUE(rows[0]["metrics"]["drift_per_million_steps"].is_number());
+
+  r = run_demcal({"query", "--format", "csv", "--metrics", "dt,drift_per_million_steps"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 4);
+  EXPECT_NE(r.out.find(",dt,drift_per_million_steps,"), std::string::npos) << r.out;
+
+  EXPECT_EQ(run_demcal({"query", "--where", "nosuch=1"}, d.path.string()).rc, 2);
+  EXPECT_EQ(run_demcal({"query", "--where", "novalue"}, d.path.string()).rc, 2);
+  EXPECT_EQ(run_demcal({"query", "--format", "xml"}, d.path.string()).rc, 2);
+
+  r = run_demcal({"status"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("small"), std::string::npos);
+  EXPECT_EQ(run_demcal({"status", "--job", "nope"}, d.path.string()).rc, 2);
+
+  // Running again reuses everything: nothing is re-run.
+  r = run_demcal({"run", "j.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("3 of 3 task(s) already done"), std::string::npos) << r.err;
+  const auto after = tasks_of(d.file("demcal.db"), "small");
+  for (std::size_t i = 0; i < after.size(); ++i) {
+    EXPECT_EQ(after[i].started_at, before[i].started_at);
+    EXPECT_EQ(after[i].attempts, 1);
+  }
+}
+
+TEST(Cli, StatusWithoutDatabaseIsBadInput) {
+  TempDir d;
+  const Result r = run_demcal({"status", "--db", "none.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_FALSE(fs::exists(d.file("none.db")));
+}
+
+TEST(Cli, ForeignDatabasesAreRejectedUntouched) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("small", {0.1}));
+  write(d.file("notes.db"), "plain text, not SQLite\n");
+  Result r = run_demcal({"run", "j.json", "--db", "notes.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("not a SQLite database"), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(d.file("notes.db")), "plain text, not SQLite\n");
+  r = run_demcal({"status", "--db", "notes.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_FALSE(fs::exists(d.file("demcal-out")));
+}
+
+TEST(Cli, PlotDrawsPngAndSvg) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("plot", {0.1}));
+  ASSERT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
+  const auto id = std::to_string(tasks_of(d.file("demcal.db"))[0].id);
+  Result r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total,kinetic", "--out", "e.png"},
+                    d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_GT(fs::file_size(d.file("e.png")), 1000u);
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "time", "--y", "total", "--out", "e.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(slurp(d.file("e.svg")).find("<svg"), std::string::npos);
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "nope", "--out", "e.png"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("nope"), std::string::npos);
+  r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+}

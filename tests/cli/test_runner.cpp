@@ -1,0 +1,144 @@
+// The runner under stress: crashing workers, a killed runner, concurrent runners
+// and overlapping jobs.
+#include "cli_util.hpp"
+
+#include <chrono>
+#include <csignal>
+#include <set>
+#include <thread>
+
+using namespace demcal::test;
+
+namespace {
+int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string& status) {
+  int n = 0;
+  for (const auto& r : rows) n += r.status == status;
+  return n;
+}
+}  // namespace
+
+TEST(Runner, CrashingWorkerFailsOnlyItsTask) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("crash", {0.05, 0.1, 0.2}));
+  const Result r = run_demcal({"run", "j.json", "--workers", "2"}, d.path.string(), {{"DEMCAL_TEST_ABORT_TASK", "1"}});
+  EXPECT_EQ(r.rc, 1);
+  const auto rows = tasks_of(d.file("demcal.db"), "crash");
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0].status, "done");
+  EXPECT_EQ(rows[2].status, "done");
+  EXPECT_EQ(rows[1].status, "failed");
+  EXPECT_NE(rows[1].error.find("SIGABRT"), std::string::npos) << rows[1].error;
+  EXPECT_EQ(rows[1].attempts, 1);
+  // Failed tasks stay failed on a plain re-run, and run again on request.
+  EXPECT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 1);
+  EXPECT_EQ(tasks_of(d.file("demcal.db"), "crash")[1].attempts, 1);
+  EXPECT_EQ(run_demcal({"run", "j.json", "--retry-failed"}, d.path.string()).rc, 0);
+  const auto again = tasks_of(d.file("demcal.db"), "crash")[1];
+  EXPECT_EQ(again.status, "done");
+  EXPECT_EQ(again.attempts, 2);
+}
+
+TEST(Runner, SigkillOfRunnerLosesNothingAndResumes) {
+  TempDir d;
+  const std::vector<double> factors = {0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.11, 0.12};
+  write(d.file("j.json"), collision_job("kill", factors, 150, 6000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  std::vector<demcal::db::TaskRow> rows;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (!fs::exists(db)) continue;
+    try {
+      rows = tasks_of(db, "kill");
+    } catch (const std::exception&) {
+      continue;  // the schema may not be there yet
+    }
+    if (count_status(rows, "done") >= 1 && count_status(rows, "running") == 1) break;
+  }
+  ASSERT_GE(count_status(rows, "done"), 1);
+  ASSERT_LT(count_status(rows, "done"), 8) << "the grid finished before the kill; make the tasks longer";
+  kill(runner, SIGKILL);
+  for (const auto& t : rows)
+    if (t.status == "running" && t.pid > 0) kill(static_cast<pid_t>(t.pid), SIGKILL);
+  finish(runner, d.path.string());
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+
+  const auto killed = tasks_of(db, "kill");  // the state the kill left behind
+  std::map<std::int64_t, demcal::db::TaskRow> done_before;
+  for (const auto& t : killed)
+    if (t.status == "done") done_before[t.id] = t;
+  ASSERT_FALSE(done_before.empty());
+
+  const Result r = run_demcal({"run", "j.json", "--workers", "1"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("re-queued 1 task"), std::string::npos) << r.err;
+  const auto after = tasks_of(db, "kill");
+  ASSERT_EQ(after.size(), factors.size());
+  EXPECT_EQ(tasks_of(db).size(), factors.size());  // no duplicates
+  std::set<std::string> keys;
+  for (const auto& t : after) {
+    keys.insert(t.key);
+    EXPECT_EQ(t.status, "done");
+    if (done_before.count(t.id)) {
+      EXPECT_EQ(t.started_at, done_before[t.id].started_at) << "finished task was re-run";
+      EXPECT_EQ(t.attempts, 1);
+    }
+  }
+  EXPECT_EQ(keys.size(), factors.size());
+}
+
+TEST(Runner, SigtermStopsRunningTasksForRetry) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("term", {0.05, 0.06, 0.07, 0.08}, 150, 6000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      if (fs::exists(db) && count_status(tasks_of(db, "term"), "running") == 1) break;
+    } catch (const std::exception&) {
+    }
+  }
+  kill(runner, SIGTERM);
+  const Result r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  const auto rows = tasks_of(db, "term");
+  EXPECT_EQ(count_status(rows, "running"), 0);
+  EXPECT_EQ(count_status(rows, "failed"), 0);
+  EXPECT_GE(count_status(rows, "pending"), 1);
+  EXPECT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
+  EXPECT_EQ(count_status(tasks_of(db, "term"), "done"), 4);
+}
+
+TEST(Runner, TwoJobsConcurrentlyOnOneDatabase) {
+  TempDir d;
+  write(d.file("a.json"), collision_job("a", {0.05, 0.1, 0.15}, 60, 2000));
+  write(d.file("b.json"), collision_job("b", {0.06, 0.12, 0.18}, 60, 2000));
+  const pid_t pa = spawn({"run", "a.json", "--workers", "1"}, d.path.string(), {}, "a");
+  const pid_t pb = spawn({"run", "b.json", "--workers", "1"}, d.path.string(), {}, "b");
+  const Result ra = finish(pa, d.path.string(), "a"), rb = finish(pb, d.path.string(), "b");
+  EXPECT_EQ(ra.rc, 0) << ra.err;
+  EXPECT_EQ(rb.rc, 0) << rb.err;
+  const auto all = tasks_of(d.file("demcal.db"));
+  EXPECT_EQ(all.size(), 6u);
+  EXPECT_EQ(count_status(all, "done"), 6);
+  for (const auto& t : all) EXPECT_EQ(t.attempts, 1);
+}
+
+TEST(Runner, OverlappingJobsReuseFinishedWorkByKey) {
+  TempDir d;
+  write(d.file("a.json"), collision_job("a", {0.1, 0.2}));
+  write(d.file("b.json"), collision_job("b", {0.2, 0.3}));
+  ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
+  const Result r = run_demcal({"run", "b.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("1 of 2 task(s) already done"), std::string::npos) << r.err;
+  const auto a = tasks_of(d.file("demcal.db"), "a"), b = tasks_of(d.file("demcal.db"), "b");
+  EXPECT_EQ(a[1].id, b[0].id);
+  EXPECT_EQ(b[0].attempts, 1);
+  EXPECT_EQ(tasks_of(d.file("demcal.db")).size(), 3u);
+  const Result q = run_demcal({"query", "--job", "b", "--format", "csv"}, d.path.string());
+  EXPECT_EQ(std::count(q.out.begin(), q.out.end(), '\n'), 3);
+}

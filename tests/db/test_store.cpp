@@ -1,0 +1,195 @@
+#include "db/schema.hpp"
+#include "db/store.hpp"
+
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using demcal::db::DbError;
+using demcal::db::Store;
+
+namespace {
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    path = fs::temp_directory_path() / ("demcal-db-test-" + std::to_string(getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  std::string file(const std::string& n) const { return (path / n).string(); }
+};
+
+std::string slurp(const std::string& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+void raw_sql(const std::string& path, const char* sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  sqlite3_close(db);
+}
+
+std::vector<demcal::db::NewTask> tasks(std::initializer_list<const char*> keys) {
+  std::vector<demcal::db::NewTask> out;
+  for (const char* k : keys) out.push_back({k, "collision", std::string("{\"k\":\"") + k + "\"}"});
+  return out;
+}
+
+demcal::db::Outcome done_with(double metric) {
+  demcal::db::Outcome o;
+  o.status = "done";
+  o.wall_s = 0.5;
+  o.metrics = {{"m", metric}, {"drift", INFINITY}};
+  o.artifacts = {{"hdf5", "/x/1.h5"}};
+  return o;
+}
+
+}  // namespace
+
+TEST(Store, CreatesSchemaWithVersionAndWal) {
+  TempDir d;
+  { Store s(d.file("a.db")); }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(d.file("a.db").c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &st, nullptr);
+  ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+  EXPECT_EQ(sqlite3_column_int(st, 0), demcal::db::kSchemaVersion);
+  sqlite3_finalize(st);
+  sqlite3_prepare_v2(db, "PRAGMA journal_mode", -1, &st, nullptr);
+  ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "wal");
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  Store again(d.file("a.db"));  // reopening migrates nothing and succeeds
+}
+
+TEST(Store, RejectsNonSqliteFileUntouched) {
+  TempDir d;
+  const std::string p = d.file("notes.db");
+  std::ofstream(p) << "these are my notes, not a database\n";
+  const std::string before = slurp(p);
+  try {
+    Store s(p);
+    FAIL() << "expected DbError";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input());
+    EXPECT_NE(std::string(e.what()).find("not a SQLite database"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(slurp(p), before);
+}
+
+TEST(Store, RejectsForeignSqliteUntouched) {
+  TempDir d;
+  const std::string p = d.file("other.db");
+  raw_sql(p, "CREATE TABLE customers(id INTEGER, name TEXT)");
+  const std::string before = slurp(p);
+  try {
+    Store s(p);
+    FAIL() << "expected DbError";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input());
+    EXPECT_NE(std::string(e.what()).find("not a demcal"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(slurp(p), before);
+}
+
+TEST(Store, RejectsNewerSchemaUntouched) {
+  TempDir d;
+  const std::string p = d.file("new.db");
+  { Store s(p); }
+  raw_sql(p, "PRAGMA journal_mode=DELETE; PRAGMA user_version=99");
+  const std::string before = slurp(p);
+  try {
+    Store s(p);
+    FAIL() << "expected DbError";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input());
+    EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(slurp(p), before);
+}
+
+TEST(Store, RejectsCorruptFile) {
+  TempDir d;
+  const std::string p = d.file("bad.db");
+  { Store s(p); s.put_job("j", "{}", tasks({"a", "b"})); }
+  raw_sql(p, "PRAGMA journal_mode=DELETE");
+  std::string bytes = slurp(p);
+  for (std::size_t i = 100; i < bytes.size(); i += 7) bytes[i] = static_cast<char>(bytes[i] ^ 0x5a);
+  std::ofstream(p, std::ios::binary | std::ios::trunc) << bytes;
+  EXPECT_THROW({ Store s(p); }, DbError);
+  EXPECT_EQ(slurp(p), bytes);
+}
+
+TEST(Store, ClaimIsExclusiveAndFinishStoresResults) {
+  TempDir d;
+  Store s(d.file("a.db"));
+  s.put_job("j", "{}", tasks({"k1", "k2"}));
+  auto rows = s.tasks("j");
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].status, "pending");
+  EXPECT_TRUE(s.claim(rows[0].id, "w1"));
+  EXPECT_FALSE(s.claim(rows[0].id, "w2"));
+  EXPECT_FALSE(s.finish(rows[0].id, "w2", done_with(1.0)));  // not the holder
+  EXPECT_TRUE(s.finish(rows[0].id, "w1", done_with(2.0)));
+  const auto t = s.task(rows[0].id);
+  EXPECT_EQ(t->status, "done");
+  EXPECT_EQ(t->attempts, 1);
+  const auto m = s.metrics(rows[0].id);
+  ASSERT_EQ(m.size(), 2u);
+  EXPECT_EQ(m[0].second, 2.0);
+  EXPECT_TRUE(std::isinf(m[1].second));
+  EXPECT_EQ(s.artifacts(rows[0].id).size(), 1u);
+  EXPECT_EQ(s.counts("j")["j"]["done"], 1);
+  EXPECT_EQ(s.counts("j")["j"]["pending"], 1);
+}
+
+TEST(Store, OverlappingJobsShareTasksByKey) {
+  TempDir d;
+  Store s(d.file("a.db"));
+  s.put_job("a", "{}", tasks({"k1", "k2"}));
+  s.put_job("b", "{}", tasks({"k2", "k3"}));
+  const auto a = s.tasks("a"), b = s.tasks("b");
+  EXPECT_EQ(a[1].id, b[0].id);
+  EXPECT_EQ(s.tasks().size(), 3u);
+  // Re-submitting a job is idempotent.
+  s.put_job("a", "{}", tasks({"k1", "k2"}));
+  EXPECT_EQ(s.tasks().size(), 3u);
+  EXPECT_EQ(s.tasks("a").size(), 2u);
+}
+
+TEST(Store, RequeuesTasksOfDeadWorkersAndReleases) {
+  TempDir d;
+  Store s(d.file("a.db"));
+  s.put_job("j", "{}", tasks({"k1", "k2", "k3"}));
+  const auto rows = s.tasks("j");
+  ASSERT_TRUE(s.claim(rows[0].id, "dead"));
+  ASSERT_TRUE(s.claim(rows[1].id, "alive"));
+  ASSERT_TRUE(s.claim(rows[2].id, "alive"));
+  EXPECT_EQ(s.requeue_dead([](const std::string& w) { return w == "alive"; }), 1);
+  EXPECT_EQ(s.task(rows[0].id)->status, "pending");
+  EXPECT_EQ(s.task(rows[0].id)->attempts, 1);
+  s.release(rows[1].id, "alive", "interrupted");
+  EXPECT_EQ(s.task(rows[1].id)->status, "pending");
+  EXPECT_EQ(s.task(rows[2].id)->status, "running");
+}
+
+TEST(Store, ReadOnlyOpenDoesNotCreate) {
+  TempDir d;
+  EXPECT_THROW({ Store s(d.file("missing.db"), true); }, DbError);
+  EXPECT_FALSE(fs::exists(d.file("missing.db")));
+}

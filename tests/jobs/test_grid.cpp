@@ -1,0 +1,110 @@
+#include "jobs/job_spec.hpp"
+#include "jobs/physics_version.hpp"
+#include "jobs/task_key.hpp"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+using demcal::jobs::Job;
+using demcal::jobs::parse_job;
+using nlohmann::json;
+
+namespace {
+json base() {
+  return json::parse(R"({
+    "name": "g", "scene": "collision",
+    "material": {"kn": 3e7, "diameter": {"min": 0.001, "max": 0.002}},
+    "collision": {"particles": 20, "steps": 100}
+  })");
+}
+Job parse(const json& j) { return parse_job(j.dump(), "test.json"); }
+}  // namespace
+
+TEST(Grid, SingleTaskWithoutLists) {
+  const Job job = parse(base());
+  ASSERT_EQ(job.tasks.size(), 1u);
+  EXPECT_TRUE(job.axes.empty());
+  const json& p = job.tasks[0].params;
+  EXPECT_EQ(p["particles"], 20);
+  EXPECT_EQ(p["seed"], 1);
+  EXPECT_DOUBLE_EQ(p["dt_factor"].get<double>(), 0.2);  // resolved default
+  EXPECT_EQ(p["sample_every"], 1);                      // steps / 200, at least 1
+  EXPECT_FALSE(p.contains("dt"));
+}
+
+TEST(Grid, CartesianProductTimesReplicas) {
+  json j = base();
+  j["grid"] = {{"theta_deg", {10, 20, 30}}, {"eta", {0.0, 0.1}}};
+  j["collision"]["particles"] = {20, 30};
+  j["replicas"] = 2;
+  j["seed"] = 7;
+  const Job job = parse(j);
+  EXPECT_EQ(job.tasks.size(), 3u * 2u * 2u * 2u);
+  // Replicas are innermost, with distinct seeds.
+  EXPECT_EQ(job.tasks[0].params["seed"], 7);
+  EXPECT_EQ(job.tasks[1].params["seed"], 8);
+  EXPECT_EQ(job.tasks[0].params.dump(), [&] { json p = job.tasks[1].params; p["seed"] = 7; return p.dump(); }());
+  std::set<std::string> keys, combos;
+  for (const auto& t : job.tasks) {
+    keys.insert(t.key);
+    combos.insert(t.params["theta_deg"].dump() + t.params["eta"].dump() + t.params["particles"].dump() +
+                  t.params["seed"].dump());
+  }
+  EXPECT_EQ(keys.size(), job.tasks.size());
+  EXPECT_EQ(combos.size(), job.tasks.size());
+  for (std::size_t i = 0; i < job.tasks.size(); ++i) EXPECT_EQ(job.tasks[i].index, i);
+}
+
+TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
+  json j = base();
+  j["material"]["theta_deg"] = 5;
+  j["grid"] = {{"theta_deg", {30}}};
+  const Job job = parse(j);
+  ASSERT_EQ(job.tasks.size(), 1u);
+  EXPECT_TRUE(job.tasks[0].params["theta_deg"].is_number_float());
+  EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 30.0);
+  // 30 and 30.0 are the same work: the same key.
+  json k = base();
+  k["material"]["theta_deg"] = 30.0;
+  EXPECT_EQ(parse(k).tasks[0].key, job.tasks[0].key);
+}
+
+TEST(Grid, KeyDependsOnSceneParamsAndIsStable) {
+  const Job a = parse(base());
+  const Job b = parse(base());
+  EXPECT_EQ(a.tasks[0].key, b.tasks[0].key);
+  EXPECT_EQ(a.tasks[0].key.size(), 32u);
+  json j = base();
+  j["name"] = "other-name";  // the job's name is not part of the work
+  EXPECT_EQ(parse(j).tasks[0].key, a.tasks[0].key);
+  j["seed"] = 2;
+  EXPECT_NE(parse(j).tasks[0].key, a.tasks[0].key);
+  EXPECT_NE(demcal::jobs::task_key("other", a.tasks[0].params), a.tasks[0].key);
+  static_assert(demcal::jobs::kPhysicsVersion >= 1, "physics version is part of the key");
+}
+
+TEST(Grid, FidelitySelectsDefaultSteps) {
+  json j = base();
+  j["collision"].erase("steps");
+  j["fidelity"] = "quick";
+  const auto quick = parse(j).tasks[0].params["steps"].get<long>();
+  j["fidelity"] = "reference";
+  const auto ref = parse(j).tasks[0].params["steps"].get<long>();
+  EXPECT_LT(quick, ref);
+  EXPECT_EQ(parse(j).fidelity, "reference");
+}
+
+TEST(Grid, DegreesBecomeRadiansOnlyInside) {
+  json j = base();
+  j["material"]["theta_deg"] = 30;
+  const Job job = parse(j);
+  EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 30.0);
+}
+
+TEST(Grid, ExamplesWithRegisteredScenesValidate) {
+  for (const char* name : {"quickstart.json", "collision-timestep.json"}) {
+    const Job job = demcal::jobs::load_job_file(std::string(DEMCAL_EXAMPLES_DIR) + "/" + name);
+    EXPECT_GT(job.tasks.size(), 1u) << name;
+  }
+}
