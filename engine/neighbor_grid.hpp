@@ -28,7 +28,7 @@ class NeighborList {
 
   // True when some particle has moved, or grown, by more than half the skin since
   // the last build.
-  bool needs_rebuild(const Particles& p, const Domain& dom, double skin) const;
+  bool needs_rebuild(const Particles& p, const Domain& dom, double skin, int threads = 1) const;
 
   std::size_t size() const { return j.size(); }
   long builds() const { return builds_; }

@@ -229,7 +229,7 @@ void World::wall_forces(double& max_overlap, long& max_overlap_i) {
 }
 
 void World::compute_forces() {
-  if (nl_.needs_rebuild(p_, dom_, skin_)) nl_.build(p_, dom_, skin_, opt_.threads);
+  if (nl_.needs_rebuild(p_, dom_, skin_, opt_.threads)) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
   const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
