@@ -1,0 +1,172 @@
+#include "repose_profile.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace demcal::engine {
+namespace {
+
+struct Line {
+  double slope = 0, intercept = 0, slope_se = 0;
+  bool ok = false;
+};
+
+Line least_squares(const double* x, const double* h, int n) {
+  Line l;
+  if (n < 2) return l;
+  double mx = 0, mh = 0;
+  for (int i = 0; i < n; ++i) {
+    mx += x[i];
+    mh += h[i];
+  }
+  mx /= n;
+  mh /= n;
+  double sxx = 0, sxh = 0;
+  for (int i = 0; i < n; ++i) {
+    sxx += (x[i] - mx) * (x[i] - mx);
+    sxh += (x[i] - mx) * (h[i] - mh);
+  }
+  if (!(sxx > 0.0)) return l;
+  l.slope = sxh / sxx;
+  l.intercept = mh - l.slope * mx;
+  if (n > 2) {
+    double ssr = 0;
+    for (int i = 0; i < n; ++i) {
+      const double e = h[i] - (l.intercept + l.slope * x[i]);
+      ssr += e * e;
+    }
+    l.slope_se = std::sqrt(ssr / (n - 2) / sxx);
+  }
+  l.ok = true;
+  return l;
+}
+
+}  // namespace
+
+SurfaceProfile surface_profile(const std::vector<Vec3>& pos, const std::vector<double>& radius,
+                               const std::vector<std::uint8_t>* include, double x_lo, double x_hi, double bin,
+                               double base) {
+  SurfaceProfile p;
+  p.x0 = x_lo;
+  p.bin = bin;
+  if (!(bin > 0.0) || !(x_hi > x_lo)) return p;
+  const int n = std::max(1, static_cast<int>(std::ceil((x_hi - x_lo) / bin)));
+  p.x.resize(n);
+  p.h.assign(n, 0.0);
+  p.count.assign(n, 0);
+  for (int b = 0; b < n; ++b) p.x[b] = x_lo + (b + 0.5) * bin;
+  for (std::size_t i = 0; i < pos.size(); ++i) {
+    if (include && !(*include)[i]) continue;
+    const double xi = pos[i][0];
+    if (xi < x_lo || xi >= x_hi) continue;
+    const int b = std::min(n - 1, static_cast<int>((xi - x_lo) / bin));
+    p.count[b] += 1;
+    p.h[b] = std::max(p.h[b], pos[i][2] + radius[i] - base);
+  }
+  return p;
+}
+
+SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, double f_lo, double f_hi) {
+  SlopeFit f;
+  const int n = static_cast<int>(std::min(x.size(), h.size()));
+  if (n < 3) {
+    f.why = "profile has fewer than 3 bins";
+    return f;
+  }
+  int i_max = 0;
+  for (int i = 1; i < n; ++i)
+    if (h[i] >= h[i_max]) i_max = i;  // ties: the downstream-most maximum
+  f.h_max = h[i_max];
+  if (!(f.h_max > 0.0)) {
+    f.why = "empty profile";
+    return f;
+  }
+  const double top = f_hi * f.h_max, bottom = f_lo * f.h_max;
+  // Upper end of the slope: the downstream-most bin still at or above the top
+  // fraction (the crest and any plateau behind it lie upstream of it).
+  int i_up = i_max;
+  for (int i = n - 1; i >= i_max; --i)
+    if (h[i] >= top) {
+      i_up = i;
+      break;
+    }
+  // Lower end: walk downstream until the profile drops below the bottom fraction
+  // (the toe and anything beyond it are excluded).
+  int i_low = i_up;
+  while (i_low + 1 < n && h[i_low + 1] >= bottom) ++i_low;
+  f.x_upper = x[i_up];
+  f.x_lower = x[i_low];
+  std::vector<double> xs, hs;
+  for (int i = i_up; i <= i_low; ++i) {
+    if (h[i] < bottom || h[i] > top) continue;
+    xs.push_back(x[i]);
+    hs.push_back(h[i]);
+  }
+  f.points = static_cast<int>(xs.size());
+  if (f.points < 3) {
+    f.why = "fewer than 3 profile bins between the fit fractions";
+    return f;
+  }
+  const Line l = least_squares(xs.data(), hs.data(), f.points);
+  if (!l.ok) {
+    f.why = "degenerate fit";
+    return f;
+  }
+  f.ok = true;
+  f.slope = l.slope;
+  f.intercept = l.intercept;
+  f.slope_se = l.slope_se;
+  f.angle_deg = rad_to_deg(std::atan(std::abs(l.slope)));
+  f.angle_err_deg = rad_to_deg(l.slope_se / (1.0 + l.slope * l.slope));
+  return f;
+}
+
+double steepest_angle_deg(const std::vector<double>& x, const std::vector<double>& h, double x_from, double x_to,
+                          int window) {
+  std::vector<double> xs, hs;
+  for (std::size_t i = 0; i < std::min(x.size(), h.size()); ++i)
+    if (x[i] >= x_from && x[i] <= x_to) {
+      xs.push_back(x[i]);
+      hs.push_back(h[i]);
+    }
+  const int n = static_cast<int>(xs.size());
+  window = std::max(2, window);
+  double best = 0.0;
+  for (int s = 0; s + window <= n; ++s) {
+    const Line l = least_squares(xs.data() + s, hs.data() + s, window);
+    if (l.ok) best = std::max(best, rad_to_deg(std::atan(std::abs(l.slope))));
+  }
+  return best;
+}
+
+Front deposit_front(const SurfaceProfile& prof, int start, double min_height, int max_gap_bins,
+                    const std::vector<Vec3>* pos, const std::vector<double>* radius,
+                    const std::vector<std::uint8_t>* include) {
+  Front f;
+  const int n = static_cast<int>(prof.h.size());
+  int gap = 0;
+  for (int b = std::max(0, start); b < n; ++b) {
+    if (prof.h[b] >= min_height) {
+      f.bin = b;
+      gap = 0;
+    } else if (f.bin >= 0 && ++gap > max_gap_bins) {
+      break;
+    }
+  }
+  if (f.bin < 0) return f;
+  const double edge = prof.x0 + (f.bin + 1) * prof.bin;
+  f.x = edge;
+  if (pos && radius) {
+    double front = -1e300;
+    for (std::size_t i = 0; i < pos->size(); ++i) {
+      if (include && !(*include)[i]) continue;
+      const double xi = (*pos)[i][0];
+      if (xi < prof.x0 || xi >= edge) continue;
+      front = std::max(front, xi + (*radius)[i]);
+    }
+    if (front > -1e300) f.x = front;
+  }
+  return f;
+}
+
+}  // namespace demcal::engine

@@ -1,0 +1,68 @@
+#pragma once
+// Free-surface profile of a granular deposit and the angle of repose measured on it
+// (seed Sec. 2.2.4). Pure functions: they see grain positions and radii, or a
+// profile, never a World, so they are tested on synthetic heaps.
+//
+// Convention: x is the spreading direction, z is up, the deposit slopes down
+// towards +x (the column stood against a back wall at small x).
+#include "types.hpp"
+
+#include <string>
+#include <vector>
+
+namespace demcal::engine {
+
+// Heights of the free surface in bins of equal width along x.
+struct SurfaceProfile {
+  double x0 = 0.0;             // left edge of bin 0
+  double bin = 0.0;            // bin width
+  std::vector<double> x;       // bin centres
+  std::vector<double> h;       // highest grain top (z + r) in the bin minus `base`; 0 when empty
+  std::vector<int> count;      // grains whose centre lies in the bin
+};
+
+// Profile of the grains whose centres lie in [x_lo, x_hi); `include` (optional,
+// same length as x) selects the grains, e.g. the mobile ones. Heights below the
+// base are clamped to 0.
+SurfaceProfile surface_profile(const std::vector<Vec3>& pos, const std::vector<double>& radius,
+                               const std::vector<std::uint8_t>* include, double x_lo, double x_hi, double bin,
+                               double base);
+
+// Least-squares line through the slope between fractions [f_lo, f_hi] of the
+// deposit height, crest and toe excluded.
+struct SlopeFit {
+  bool ok = false;
+  std::string why;           // when !ok
+  double h_max = 0.0;        // deposit height (maximum of the profile)
+  double x_upper = 0.0;      // downstream-most bin at or above f_hi * h_max (start of the fitted slope)
+  double x_lower = 0.0;      // downstream-most bin at or above f_lo * h_max (end of the fitted slope)
+  int points = 0;            // bins used
+  double slope = 0.0;        // dh/dx of the line (negative for a heap sloping to +x)
+  double intercept = 0.0;    // h at x = 0
+  double slope_se = 0.0;     // standard error of the slope (regression)
+  double angle_deg = 0.0;    // atan(|slope|)
+  double angle_err_deg = 0.0;  // standard error of the angle: se / (1 + slope^2)
+};
+SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, double f_lo, double f_hi);
+
+// Steepest local angle: the largest atan(|slope|) of least-squares lines through
+// `window` consecutive bins lying inside [x_from, x_to] (the seed measures "the
+// steepest angle of the deposit profile"). Returns 0 when fewer than `window`
+// bins are available.
+double steepest_angle_deg(const std::vector<double>& x, const std::vector<double>& h, double x_from, double x_to,
+                          int window);
+
+// Front of the deposit: scanning from bin index `start` towards +x, the last bin
+// whose height is at least `min_height` before a run of more than `max_gap_bins`
+// lower bins (isolated bouncers beyond such a gap are ignored). Returns the
+// largest x + r of the grains in or behind that bin (exact front edge), or the
+// bin's right edge when no grains are given. -1 index when no bin qualifies.
+struct Front {
+  int bin = -1;
+  double x = 0.0;
+};
+Front deposit_front(const SurfaceProfile& prof, int start, double min_height, int max_gap_bins,
+                    const std::vector<Vec3>* pos = nullptr, const std::vector<double>* radius = nullptr,
+                    const std::vector<std::uint8_t>* include = nullptr);
+
+}  // namespace demcal::engine

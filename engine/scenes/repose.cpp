@@ -1,0 +1,507 @@
+#include "repose.hpp"
+
+#include "../errors.hpp"
+#include "../measure.hpp"
+#include "../packing.hpp"
+#include "../timestep.hpp"
+#include "../world.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+namespace demcal::engine {
+
+Material repose_seed_material() {
+  Material m;  // Table 2.1: Kn 3e7, Ks 2.7e7, rho 2650, b 1, d in [1, 2] mm
+  m.friction_angle = deg_to_rad(30.0);
+  m.rolling_eta = 0.1;
+  return m;
+}
+
+namespace {
+
+void positive(double v, const char* field) {
+  if (!std::isfinite(v) || v <= 0.0) throw ConfigError(field, "must be a finite number > 0");
+}
+void non_negative(double v, const char* field) {
+  if (!std::isfinite(v) || v < 0.0) throw ConfigError(field, "must be a finite number >= 0");
+}
+
+double mean_cube_diameter(const Material& m) {
+  if (m.d_max - m.d_min < 1e-15) return m.d_min * m.d_min * m.d_min;
+  return (std::pow(m.d_max, 4) - std::pow(m.d_min, 4)) / (4.0 * (m.d_max - m.d_min));
+}
+
+// Kinetic energy (translation + rotation) of the mobile grains.
+double kinetic_energy(const Particles& p) {
+  double e = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    e += 0.5 * p.m[i] * p.v[i].squaredNorm() + 0.2 * p.m[i] * p.r[i] * p.r[i] * p.w[i].squaredNorm();
+  }
+  return e;
+}
+
+// Mean "flow" kinetic energy per mobile grain from displacements over `span`,
+// leaving out the fastest `trim` fraction of grains (at least one when trim > 0):
+// with an undamped contact law (restitution 1) a caged rattler or a grain
+// bouncing in a pocket of the floor never stops, and one of them must not hold
+// up the verdict on thousands. `prev` is updated to the current positions.
+double flow_ke_per_grain(const Particles& p, const Domain& dom, std::vector<Vec3>& prev, double span, double trim,
+                         std::vector<double>& scratch) {
+  scratch.clear();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    Vec3 d = p.x[i] - prev[i];
+    dom.min_image(d);
+    scratch.push_back(0.5 * p.m[i] * d.squaredNorm() / (span * span));
+    prev[i] = p.x[i];
+  }
+  if (scratch.empty()) return 0.0;
+  std::size_t keep = scratch.size();
+  if (trim > 0.0) {
+    const std::size_t drop = std::max<std::size_t>(1, static_cast<std::size_t>(trim * scratch.size()));
+    keep = scratch.size() > drop ? scratch.size() - drop : 1;
+    std::nth_element(scratch.begin(), scratch.begin() + (keep - 1), scratch.end());
+  }
+  double sum = 0.0;
+  for (std::size_t i = 0; i < keep; ++i) sum += scratch[i];
+  return sum / static_cast<double>(keep);
+}
+
+Wall make_wall(const std::string& name, const Vec3& point, const Vec3& normal, bool rough) {
+  Wall w;
+  w.name = name;
+  w.point = point;
+  w.normal = normal;
+  w.frictional = rough;
+  w.rolling = rough;
+  return w;
+}
+
+std::vector<std::uint8_t> mobile_mask(const Particles& p) {
+  std::vector<std::uint8_t> m(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) m[i] = p.fixed[i] ? 0 : 1;
+  return m;
+}
+
+}  // namespace
+
+void ReposeConfig::validate() const {
+  material.validate();
+  positive(column_width, "repose.column_width");
+  positive(column_height, "repose.column_height");
+  positive(slab_depth_diameters, "repose.slab_depth_diameters");
+  non_negative(domain_length, "repose.domain_length");
+  if (domain_length > 0.0 && domain_length < column_width + material.d_max)
+    throw ConfigError("repose.domain_length", "must exceed column_width by at least one grain diameter (or be 0)");
+  non_negative(floor_spacing, "repose.floor_spacing");
+  if (floor_spacing > 0.0 && floor_spacing < material.d_max)
+    throw ConfigError("repose.floor_spacing", "must be at least d_max (grains of the floor may not overlap)");
+  if (!(fill_solid_fraction > 0.0 && fill_solid_fraction <= 0.38))
+    throw ConfigError("repose.fill_solid_fraction", "must lie in (0, 0.38] for random insertion");
+  if (!(target_solid_fraction > 0.3 && target_solid_fraction < 0.74))
+    throw ConfigError("repose.target_solid_fraction", "must lie in (0.3, 0.74)");
+  if (!(overfill >= 1.0 && overfill <= 2.0)) throw ConfigError("repose.overfill", "must lie in [1, 2]");
+  if (!std::isfinite(prep_damping) || prep_damping < 0.0 || prep_damping >= 1.0)
+    throw ConfigError("repose.prep_damping", "must lie in [0, 1)");
+  positive(settle_ke_ratio, "repose.settle_ke_ratio");
+  positive(settle_time_limit, "repose.settle_time_limit");
+  positive(rest_ke_ratio, "repose.rest_ke_ratio");
+  non_negative(collapse_drag, "repose.collapse_drag");
+  if (!(rest_trim >= 0.0 && rest_trim <= 0.1)) throw ConfigError("repose.rest_trim", "must lie in [0, 0.1]");
+  if (rest_samples < 1) throw ConfigError("repose.rest_samples", "must be at least 1");
+  non_negative(min_collapse_time, "repose.min_collapse_time");
+  positive(time_limit, "repose.time_limit");
+  positive(sample_interval, "repose.sample_interval");
+  if (!(stiffness_scale > 0.0 && stiffness_scale <= 1.0))
+    throw ConfigError("numerics.stiffness_scale", "must lie in (0, 1]");
+  non_negative(dt, "numerics.dt");
+  if (dt == 0.0) positive(dt_factor, "numerics.dt_factor");
+  positive(gravity, "repose.gravity");
+  if (!std::isfinite(energy_guard)) throw ConfigError("numerics.energy_guard", "must be finite");
+  non_negative(bin_width, "repose.bin_width");
+  if (!(fit_lo >= 0.0 && fit_lo < fit_hi && fit_hi <= 1.0))
+    throw ConfigError("repose.fit_fractions", "need 0 <= fit_lo < fit_hi <= 1");
+  non_negative(steep_window, "repose.steep_window");
+  positive(front_min_height, "repose.front_min_height");
+  non_negative(front_max_gap, "repose.front_max_gap");
+  if (threads < 1) throw ConfigError("threads", "must be at least 1");
+  const double d_mean = 0.5 * (material.d_min + material.d_max);
+  const double depth = slab_depth_diameters * d_mean;
+  const double reach = material.d_max + 0.1 * material.d_min;  // largest diameter plus the default skin
+  if (depth < 2.0 * reach) {
+    std::ostringstream os;
+    os << "slab depth " << depth << " m is below twice the interaction reach " << reach
+       << " m (periodic images would interact); use at least " << std::ceil(20.0 * reach / d_mean) / 10.0;
+    throw ConfigError("repose.slab_depth_diameters", os.str());
+  }
+  if (column_width < 2.0 * material.d_max)
+    throw ConfigError("repose.column_width", "must hold at least two of the largest grains");
+}
+
+Metrics ReposeResult::metrics() const {
+  Metrics m = {{"particles", static_cast<double>(particles)},
+               {"floor_particles", static_cast<double>(floor_particles)},
+               {"column_width_m", column_width},
+               {"column_height_m", column_height},
+               {"aspect_ratio", aspect_ratio},
+               {"column_solid_fraction", column_solid_fraction},
+               {"slab_depth_m", slab_depth_m},
+               {"domain_length_m", domain_length},
+               {"dt", dt},
+               {"dt_critical", dt_critical},
+               {"stiffness_scale", stiffness_scale},
+               {"kn", kn},
+               {"ks", ks},
+               {"prep_damping", prep_damping},
+               {"prep_time_s", prep_time_s},
+               {"collapse_drag_per_s", collapse_drag},
+               {"rest_ke_J", rest_ke_J},
+               {"bin_width_m", bin_width},
+               {"steps", static_cast<double>(steps)},
+               {"wall_s", wall_seconds},
+               {"threads", static_cast<double>(threads)}};
+  if (outcome.ok()) {
+    Metrics r = {{"repose_deg", repose_deg},
+                 {"repose_fit_err_deg", repose_fit_err_deg},
+                 {"steepest_deg", steepest_deg},
+                 {"fit_points", static_cast<double>(fit_points)},
+                 {"runout_m", runout_m},
+                 {"runout_ratio", runout_ratio},
+                 {"front_m", front_m},
+                 {"final_height_m", final_height_m},
+                 {"time_to_rest_s", time_to_rest_s},
+                 {"reached_end_wall", reached_end_wall ? 1.0 : 0.0}};
+    if (!std::isfinite(repose_deg)) r.erase(r.begin(), r.begin() + 4);  // no fit: no angle
+    m.insert(m.begin(), r.begin(), r.end());
+  }
+  return m;
+}
+
+ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
+  cfg.validate();
+  const auto t_start = std::chrono::steady_clock::now();
+  ReposeResult res;
+  res.energy.name = "energy";
+  res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x"};
+  res.prep.name = "prep";
+  res.prep.columns = {"time", "ke_per_grain", "ke_flow_per_grain"};
+  res.profile.name = "profile";
+  res.profile.columns = {"x", "h", "count"};
+  res.threads = cfg.threads;
+
+  const Material& mat = cfg.material;
+  const double d_mean = 0.5 * (mat.d_min + mat.d_max);
+  const double v_mean = kPi / 6.0 * mean_cube_diameter(mat);
+  const double m_mean = mat.density * v_mean;
+  const double W = cfg.column_width, H = cfg.column_height;
+  const double Ly = cfg.slab_depth_diameters * d_mean;
+  const double L = cfg.domain_length > 0.0 ? cfg.domain_length : W + 4.0 * H + 0.02;
+  const double g = cfg.gravity;
+  const double bin = cfg.bin_width > 0.0 ? cfg.bin_width : d_mean;
+  res.column_width = W;
+  res.slab_depth_m = Ly;
+  res.domain_length = L;
+  res.bin_width = bin;
+  res.stiffness_scale = cfg.stiffness_scale;
+  res.prep_damping = cfg.prep_damping;
+  res.collapse_drag = cfg.collapse_drag;
+  res.rest_ke_J = cfg.rest_ke_ratio * m_mean * g * d_mean;
+  {
+    std::ostringstream os;
+    os << "slab periodic in y (depth " << Ly << " m, no side walls); smooth back wall x = 0; smooth gate x = " << W
+       << " (removed at collapse); smooth end wall x = " << L << "; floor: fixed grains (same size distribution) on a"
+       << " rough plane z = 0";
+    res.boundaries = os.str();
+  }
+
+  Material law_mat = mat;
+  law_mat.kn *= cfg.stiffness_scale;
+  law_mat.ks *= cfg.stiffness_scale;
+  const ContactParams law = contact_params(law_mat);
+  res.kn = law.kn;
+  res.ks = law.ks;
+
+  std::mt19937_64 rng(cfg.seed);
+
+  // Floor: one layer of fixed grains on a jittered square grid resting on z = 0.
+  // Cells are aligned with x = 0 and x = W so that no floor grain straddles the
+  // gate plane; each grain stays inside its cell.
+  const double s0 = cfg.floor_spacing > 0.0 ? cfg.floor_spacing : mat.d_max;
+  const int nx_col = std::max(1, static_cast<int>(std::floor(W / s0)));
+  const double sx = W / nx_col;
+  const int nx = static_cast<int>(std::floor(L / sx));
+  const int ny = std::max(1, static_cast<int>(std::floor(Ly / s0)));
+  const double sy = Ly / ny;
+  Particles floor_all;
+  for (int ix = 0; ix < nx; ++ix)
+    for (int iy = 0; iy < ny; ++iy) {
+      const double r = 0.5 * uniform(rng, mat.d_min, mat.d_max);
+      const double jx = (0.5 * sx - r) * uniform(rng, -1.0, 1.0);
+      const double jy = (0.5 * sy - r) * uniform(rng, -1.0, 1.0);
+      floor_all.add(Vec3((ix + 0.5) * sx + jx, (iy + 0.5) * sy + jy, r), r, mat.density, true);
+    }
+  double floor_level = 0.0, floor_top = 0.0;
+  for (std::size_t i = 0; i < floor_all.size(); ++i) {
+    floor_level += 2.0 * floor_all.r[i];
+    floor_top = std::max(floor_top, 2.0 * floor_all.r[i]);
+  }
+  floor_level /= static_cast<double>(floor_all.size());
+  res.floor_level = floor_level;
+  res.floor_particles = static_cast<long>(floor_all.size());
+
+  // Column grains: random insertion in a tall region behind the gate.
+  const double target_vs = cfg.target_solid_fraction * W * H * Ly;
+  const std::size_t n_grains = static_cast<std::size_t>(std::ceil(cfg.overfill * target_vs / v_mean));
+  std::vector<double> radii = sample_radii(n_grains, mat.d_min, mat.d_max, rng);
+  double vs = 0.0;
+  for (double r : radii) vs += sphere_volume(r);
+  const double z0 = floor_top + 0.05 * mat.d_min;
+  const double fill_h = vs / (cfg.fill_solid_fraction * W * Ly);
+  Particles prep;
+  for (std::size_t i = 0; i < floor_all.size(); ++i)
+    if (floor_all.x[i][0] < W) prep.add(floor_all.x[i], floor_all.r[i], mat.density, true);
+  const std::size_t n_floor_prep = prep.size();
+  insert_random(prep, radii, Vec3(0.0, 0.0, z0), Vec3(W, Ly, z0 + fill_h), mat.density, rng, {false, true, false});
+
+  double m_min = 1e300;
+  for (std::size_t i = n_floor_prep; i < prep.size(); ++i) m_min = std::min(m_min, prep.m[i]);
+  WorldOptions opt;
+  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, law.kn);
+  opt.gravity = Vec3(0.0, 0.0, -g);
+  opt.threads = cfg.threads;
+  opt.local_damping = cfg.prep_damping;
+  res.dt = opt.dt;
+
+  Domain dom;
+  dom.lo = Vec3(0.0, 0.0, 0.0);
+  dom.hi = Vec3(L, Ly, z0 + fill_h + H);
+  dom.periodic = {false, true, false};
+
+  const Wall floor_wall = make_wall("floor", Vec3::Zero(), Vec3::UnitZ(), true);
+  const Wall back_wall = make_wall("back", Vec3::Zero(), Vec3::UnitX(), false);
+  const Wall gate_wall = make_wall("gate", Vec3(W, 0.0, 0.0), -Vec3::UnitX(), false);
+  const Wall end_wall = make_wall("end", Vec3(L, 0.0, 0.0), -Vec3::UnitX(), false);
+
+  long steps_total = 0;
+  const double ke_unit = m_mean * g * d_mean;
+  std::string stage = "fill";
+  double prep_clock = 0.0;
+  try {
+    // Preparation: damped settling behind the gate, levelling, settling again.
+    auto settle = [&](World& w, double min_time, const char* name) {
+      stage = name;
+      if (obs) obs->on_stage(name);
+      const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
+      const long n_mobile = static_cast<long>(w.particles().size() - n_floor_prep);
+      const double t0 = w.time();
+      std::vector<Vec3> prev = w.particles().x;
+      std::vector<double> scratch;
+      while (true) {
+        w.run(chunk);
+        steps_total += chunk;
+        const double t = w.time() - t0;
+        const double ke_all = kinetic_energy(w.particles()) / static_cast<double>(std::max(1L, n_mobile));
+        const double ke =
+            flow_ke_per_grain(w.particles(), w.domain(), prev, chunk * w.dt(), cfg.rest_trim, scratch);
+        res.prep.add({prep_clock + t, ke_all, ke}, nullptr);
+        if (t >= min_time && ke < cfg.settle_ke_ratio * ke_unit) break;
+        if (t > cfg.settle_time_limit) {
+          std::ostringstream os;
+          const Particles& pp = w.particles();
+          std::size_t fast = 0;
+          for (std::size_t i = 0; i < pp.size(); ++i)
+            if (pp.v[i].squaredNorm() > pp.v[fast].squaredNorm()) fast = i;
+          os << "column preparation (" << name << ") not at rest after " << t << " s: kinetic energy per grain "
+             << ke << " J, threshold " << cfg.settle_ke_ratio * ke_unit << " J; fastest grain at ("
+             << pp.x[fast].transpose() << ") m moves at " << pp.v[fast].norm() << " m/s";
+          throw std::runtime_error(os.str());
+        }
+      }
+      prep_clock += w.time() - t0;
+      return w.time() - t0;
+    };
+
+    World w1(std::move(prep), {floor_wall, back_wall, gate_wall}, dom, law, opt);
+    res.prep_time_s += settle(w1, std::sqrt(2.0 * fill_h / g), "settle");
+    if (obs) obs->on_progress(0.15);
+
+    // Level: remove grains whose top is above the target height.
+    stage = "level";
+    Particles lev = w1.particles();
+    std::vector<std::uint8_t> drop(lev.size(), 0);
+    long kept = 0;
+    for (std::size_t i = 0; i < lev.size(); ++i) {
+      lev.v[i].setZero();
+      lev.w[i].setZero();
+      if (lev.fixed[i]) continue;
+      drop[i] = lev.x[i][2] + lev.r[i] > floor_level + H ? 1 : 0;
+      kept += drop[i] ? 0 : 1;
+    }
+    lev.remove_if(drop);
+    World w2(std::move(lev), {floor_wall, back_wall, gate_wall}, dom, law, opt);
+    res.prep_time_s += settle(w2, 0.02, "settle_levelled");
+    if (obs) obs->on_progress(0.25);
+
+    // Column as prepared.
+    double top = 0.0, vcol = 0.0;
+    const Particles& pc = w2.particles();
+    for (std::size_t i = 0; i < pc.size(); ++i) {
+      if (pc.fixed[i]) continue;
+      top = std::max(top, pc.x[i][2] + pc.r[i]);
+      vcol += sphere_volume(pc.r[i]);
+    }
+    res.particles = kept;
+    res.column_height = top - floor_level;
+    res.aspect_ratio = res.column_height / W;
+    res.column_solid_fraction = vcol / (W * Ly * res.column_height);
+    if (res.column_height < 0.97 * H) {
+      std::ostringstream os;
+      os << "column settled to " << res.column_height << " m, below the target " << H
+         << " m: raise overfill or lower target_solid_fraction";
+      res.outcome.warnings.push_back(os.str());
+    }
+
+    // Collapse: full floor, no gate, no damping. The contact history of the column
+    // is rebuilt within the first steps (the world is reassembled with the floor
+    // beyond the gate, which the gate plane would otherwise have touched).
+    stage = "collapse";
+    if (obs) obs->on_stage("collapse");
+    Particles all;
+    for (std::size_t i = 0; i < floor_all.size(); ++i) all.add(floor_all.x[i], floor_all.r[i], mat.density, true);
+    const std::size_t n_floor = all.size();
+    for (std::size_t i = 0; i < pc.size(); ++i)
+      if (!pc.fixed[i]) all.add(pc.x[i], pc.r[i], mat.density, false);
+    WorldOptions copt = opt;
+    copt.local_damping = 0.0;
+    Wall gate_off = gate_wall;
+    gate_off.active = false;
+    World w(std::move(all), {floor_wall, back_wall, gate_off, end_wall}, dom, law, copt);
+    const StabilityLimits lim = stability_limits(w);
+    res.dt_critical = lim.governing().dt_critical;
+    res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
+    if (cfg.energy_guard >= 0.0) w.enable_energy_guard(cfg.energy_guard, 1000);
+
+    const std::vector<std::uint8_t> mobile = mobile_mask(w.particles());
+    const double n_mobile = static_cast<double>(res.particles);
+    const int gap_bins = static_cast<int>(std::ceil(cfg.front_max_gap * d_mean / bin));
+    auto front_now = [&]() {
+      const Particles& p = w.particles();
+      const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
+      return deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile).x;
+    };
+    const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
+    std::vector<Vec3> x_prev = w.particles().x;
+    std::vector<double> scratch;
+    auto sample = [&]() {
+      const Particles& p = w.particles();
+      const double ke = kinetic_energy(p);
+      const double ke_flow = flow_ke_per_grain(p, w.domain(), x_prev, chunk * w.dt(), cfg.rest_trim, scratch);
+      res.energy.add({w.time(), ke, ke / n_mobile, ke_flow, front_now()}, obs);
+      return ke_flow;
+    };
+    w.refresh();
+    sample();
+    int quiet = 0;
+    bool at_rest = false;
+    const long drag_every = 100;
+    const double drag_factor = std::exp(-cfg.collapse_drag * drag_every * w.dt());
+    while (true) {
+      if (cfg.collapse_drag > 0.0) {
+        for (long done = 0; done < chunk;) {
+          const long k = std::min(drag_every, chunk - done);
+          w.run(k);
+          done += k;
+          Particles& pm = w.particles();
+          const double f = k == drag_every ? drag_factor : std::exp(-cfg.collapse_drag * k * w.dt());
+          for (std::size_t i = 0; i < pm.size(); ++i)
+            if (!pm.fixed[i]) {
+              pm.v[i] *= f;
+              pm.w[i] *= f;
+            }
+        }
+      } else {
+        w.run(chunk);
+      }
+      steps_total += chunk;
+      const double ke = sample();
+      const double t = w.time();
+      quiet = ke < res.rest_ke_J ? quiet + 1 : 0;
+      if (obs) obs->on_progress(0.25 + 0.75 * std::min(1.0, t / cfg.time_limit));
+      if (t >= cfg.min_collapse_time && quiet >= cfg.rest_samples) {
+        at_rest = true;
+        break;
+      }
+      if (t >= cfg.time_limit) break;
+    }
+    res.steps = steps_total;
+    const Particles& p = w.particles();
+    res.final_particles = p;
+    res.final_particles.f.clear();  // forces and torques are not part of the record
+    res.final_particles.t.clear();
+    (void)n_floor;
+
+    // Final profile (reported even when not settled, for inspection).
+    const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
+    for (std::size_t b = 0; b < prof.x.size(); ++b)
+      res.profile.add({prof.x[b], prof.h[b], static_cast<double>(prof.count[b])}, nullptr);
+
+    if (!at_rest) {
+      std::ostringstream os;
+      os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit
+         << " s): flow kinetic energy per grain " << res.energy.rows.back()[3] << " J, threshold " << res.rest_ke_J
+         << " J";
+      res.outcome.status = SceneStatus::not_settled;
+      res.outcome.failed_stage = "collapse";
+      res.outcome.message = os.str();
+    } else {
+      res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
+      const SlopeFit fit = fit_slope(prof.x, prof.h, cfg.fit_lo, cfg.fit_hi);
+      const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
+      res.final_height_m = fit.h_max;
+      res.front_m = front.x;
+      res.runout_m = front.x - W;
+      res.runout_ratio = res.runout_m / W;
+      for (std::size_t i = 0; i < p.size(); ++i)
+        if (mobile[i] && p.x[i][0] + p.r[i] > L - 0.5 * mat.d_min) res.reached_end_wall = true;
+      if (res.reached_end_wall)
+        res.outcome.warnings.push_back("grains reached the end wall: runout is bounded by domain_length");
+      if (fit.ok) {
+        res.repose_deg = fit.angle_deg;
+        res.repose_fit_err_deg = fit.angle_err_deg;
+        res.fit_points = fit.points;
+        res.fit_slope = fit.slope;
+        res.fit_intercept = fit.intercept;
+        res.fit_x_upper = fit.x_upper;
+        res.fit_x_lower = fit.x_lower;
+        const double win = cfg.steep_window > 0.0 ? cfg.steep_window : 5.0 * d_mean;
+        const int wbins = std::max(2, static_cast<int>(std::lround(win / bin)));
+        res.steepest_deg = steepest_angle_deg(prof.x, prof.h, fit.x_upper, fit.x_lower, wbins);
+      } else {
+        res.repose_deg = NAN;
+        res.outcome.warnings.push_back("no angle of repose: " + fit.why);
+      }
+    }
+  } catch (const InstabilityError& e) {
+    res.outcome.status = SceneStatus::unstable;
+    res.outcome.failed_stage = stage;
+    res.outcome.message = e.what();
+  } catch (const std::runtime_error& e) {
+    res.outcome.status = SceneStatus::not_settled;
+    res.outcome.failed_stage = stage;
+    res.outcome.message = e.what();
+  }
+  res.steps = steps_total;
+  for (const auto& wmsg : res.outcome.warnings) {
+    if (!res.outcome.message.empty()) res.outcome.message += "; ";
+    res.outcome.message += wmsg;
+  }
+  res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  if (obs) obs->on_progress(1.0);
+  return res;
+}
+
+}  // namespace demcal::engine

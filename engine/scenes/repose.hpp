@@ -1,0 +1,131 @@
+#pragma once
+// Angle of repose by granular column collapse (seed Sec. 2.2.4, Figs. 2.14, 2.15).
+//
+// A quasi-2D slab: x is the spreading direction, z is up, y is periodic with a
+// depth of a few mean diameters (the slab replaces side walls: there are none).
+// A column of grains (column_width x column_height) is generated against a smooth
+// back wall (x = 0) behind a smooth gate (x = column_width), settled under gravity
+// with temporary local damping, levelled to column_height and settled again; the
+// damping is switched off and the gate removed (wall.active = false). The grains
+// collapse undamped (energy leaves by friction and plastic rolling only) and
+// spread over a rough floor of fixed grains of the same size distribution, until
+// the kinetic energy per mobile grain stays below a threshold or a time limit is
+// reached; the latter is reported as not_settled, never as a result. A smooth end
+// wall at x = domain_length keeps stray grains in the box.
+//
+// Real density, real gravity: this scene is dynamic. The stiffness can be scaled
+// (stiffness_scale < 1: Kn and Ks both scaled, the time step grows with
+// 1/sqrt(scale)); every knob is recorded in the result.
+#include "../material.hpp"
+#include "../observer.hpp"
+#include "../particles.hpp"
+#include "../repose_profile.hpp"
+#include "scene_status.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace demcal::engine {
+
+// The seed's material for this scene: Table 2.1 with theta = 30 deg, eta = 0.1.
+Material repose_seed_material();
+
+struct ReposeConfig {
+  Material material = repose_seed_material();
+
+  // Geometry [m]
+  double column_width = 0.05;        // L0: gate position
+  double column_height = 0.05;       // H0: fill height after levelling (above the floor level)
+  double slab_depth_diameters = 4.0; // periodic depth in units of d_mean (>= 2 (d_max + skin) / d_mean)
+  double domain_length = 0.0;        // x of the end wall; 0: column_width + 4 * column_height + 0.02 m
+  double floor_spacing = 0.0;        // centre spacing of the fixed floor grains' square grid; 0: d_max
+
+  // Preparation
+  double fill_solid_fraction = 0.33;   // solid fraction of the random insertion region
+  double target_solid_fraction = 0.60; // expected settled solid fraction, sizes the grain count
+  double overfill = 1.08;              // extra grains generated, trimmed by levelling
+  double prep_damping = 0.7;           // local damping during preparation only (off for the collapse)
+  double settle_ke_ratio = 5e-5;       // preparation rest: flow KE per grain / (m_mean g d_mean), trimmed
+  double settle_time_limit = 1.5;      // [s] per preparation settle
+
+  // Collapse
+  // Rest is judged on the "flow" kinetic energy: KE of each grain's mean velocity
+  // over one sample interval (displacement / interval). Undamped contacts keep
+  // ringing elastically with displacements of nanometres; the instantaneous KE
+  // (also recorded) then never decays, although no grain moves.
+  double rest_ke_ratio = 1e-5;     // rest: flow KE per mobile grain / (m_mean g d_mean)
+  double rest_trim = 0.01;         // fastest fraction of grains left out of the rest check (rattlers)
+  int rest_samples = 4;            // ... for this many consecutive samples
+  // Background viscous drag in the collapse [1/s]: every 100 steps the mobile
+  // grains' velocities are scaled by exp(-rate * 100 dt). 0 as the seed. The seed's
+  // law has no dissipation without friction, so theta = eta = 0 never comes to rest
+  // unless this is > 0. (Local damping would be the wrong tool here: it resists
+  // motion by a fraction of the force, like friction, and holds a frictionless heap
+  // at ~20 deg.)
+  double collapse_drag = 0.0;
+  double min_collapse_time = 0.05; // [s] rest is not judged earlier (the column starts at rest)
+  double time_limit = 2.0;         // [s] after the gate opens; beyond it: not_settled
+  double sample_interval = 0.005;  // [s] between series rows and rest checks
+
+  // Numerics
+  double stiffness_scale = 1.0;  // Kn, Ks multiplied by this (1: the seed's values)
+  double dt = 0.0;               // explicit step [s]; 0: dt_factor * sqrt(m_min / Kn_scaled)
+  double dt_factor = 0.465;      // 0.465 * sqrt(m_min/Kn) = 1.0e-7 s for the seed's material (its dt)
+  double gravity = 9.81;         // [m/s^2], along -z
+  double energy_guard = 0.02;    // relative energy-growth tolerance during the collapse; < 0: off
+
+  // Measurement
+  double bin_width = 0.0;         // profile bin [m]; 0: d_mean
+  double fit_lo = 0.2, fit_hi = 0.8;  // fit between these fractions of the deposit height
+  double steep_window = 0.0;      // steepest-angle window [m]; 0: 5 * d_mean
+  double front_min_height = 0.25; // a bin belongs to the deposit above this height [d_mean]
+  double front_max_gap = 2.0;     // gap that detaches bouncers from the deposit [d_mean]
+
+  std::uint64_t seed = 1;
+  int threads = 1;
+
+  void validate() const;  // throws ConfigError naming the field
+};
+
+struct ReposeResult {
+  SceneOutcome outcome;
+
+  // Measurements (meaningful only when outcome.ok())
+  double repose_deg = 0, repose_fit_err_deg = 0, steepest_deg = 0;
+  int fit_points = 0;
+  double fit_slope = 0, fit_intercept = 0, fit_x_upper = 0, fit_x_lower = 0;  // line h = intercept + slope x
+  double runout_m = 0;        // front - gate position
+  double runout_ratio = 0;    // (L_inf - L0) / L0
+  double front_m = 0;         // L_inf: front position from the back wall
+  double final_height_m = 0;  // deposit height above the floor level
+  double time_to_rest_s = 0;  // after the gate opened
+  bool reached_end_wall = false;
+
+  // Set-up, recorded
+  long particles = 0;         // mobile grains after levelling
+  long floor_particles = 0;
+  double column_width = 0, column_height = 0, aspect_ratio = 0, column_solid_fraction = 0;
+  double slab_depth_m = 0, domain_length = 0, floor_level = 0;
+  double dt = 0, dt_critical = 0;
+  std::string critical_mode;
+  double stiffness_scale = 1, kn = 0, ks = 0;
+  double prep_damping = 0, prep_time_s = 0, collapse_drag = 0;
+  double rest_ke_J = 0;       // the threshold in joules (flow KE per grain, trimmed)
+  double bin_width = 0;
+  long steps = 0;
+  double wall_seconds = 0;
+  int threads = 1;
+  std::string boundaries;     // words: which walls, which are periodic
+
+  Series prep;     // preparation: time, ke_per_grain, ke_flow_per_grain (damped settling behind the gate)
+  Series energy;   // collapse: time, kinetic, ke_per_grain, ke_flow_per_grain (trimmed), front_x
+  Series profile;  // final: x, h, count
+  Particles final_particles;  // floor (fixed) grains first, then the mobile ones
+
+  Metrics metrics() const;
+};
+
+ReposeResult run_repose(const ReposeConfig& config, Observer* observer = nullptr);
+
+}  // namespace demcal::engine

@@ -1,0 +1,577 @@
+#include "triaxial.hpp"
+
+#include "../errors.hpp"
+#include "../measure.hpp"
+#include "../packing.hpp"
+#include "../servo_wall.hpp"
+#include "../timestep.hpp"
+#include "../world.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+namespace demcal::engine {
+
+Material triaxial_seed_material() {
+  Material m;  // Kn, Ks, density, diameters: Table 2.1 defaults
+  m.friction_angle = deg_to_rad(30.0);
+  m.rolling_b = 1.0;
+  m.rolling_eta = 0.1;
+  return m;
+}
+
+const char* to_string(Packing p) { return p == Packing::dense ? "dense" : "loose"; }
+
+void TriaxialConfig::validate() const {
+  material.validate();
+  auto positive = [](double v, const char* f) {
+    if (!std::isfinite(v) || v <= 0.0) throw ConfigError(f, "must be a finite number > 0");
+  };
+  if (particles < 50) throw ConfigError("triaxial.particles", "must be at least 50");
+  positive(confining_pressure, "triaxial.confining_pressure");
+  positive(strain_rate, "triaxial.strain_rate");
+  if (!(axial_strain > 0.0 && axial_strain < 0.6)) throw ConfigError("triaxial.axial_strain", "must lie in (0, 0.6)");
+  if (density_scale < 0.0 || !std::isfinite(density_scale))
+    throw ConfigError("triaxial.density_scale", "must be finite and >= 0 (0: use scaled_density)");
+  if (density_scale == 0.0) positive(scaled_density, "triaxial.scaled_density");
+  if (!(aspect_ratio >= 0.5 && aspect_ratio <= 4.0)) throw ConfigError("triaxial.aspect_ratio", "must lie in [0.5, 4]");
+  if (!(initial_solid_fraction > 0.05 && initial_solid_fraction <= 0.4))
+    throw ConfigError("triaxial.initial_solid_fraction", "must lie in (0.05, 0.4] for random insertion");
+  if (!(prep_damping >= 0.0 && prep_damping < 1.0)) throw ConfigError("triaxial.prep_damping", "must lie in [0, 1)");
+  positive(prep_strain_rate, "triaxial.prep_strain_rate");
+  if (!std::isfinite(prep_pressure_factor) || prep_pressure_factor < 1.0 || prep_pressure_factor > 1000.0)
+    throw ConfigError("triaxial.prep_pressure_factor", "must lie in [1, 1000]");
+  if (!(stress_tolerance > 0.0 && stress_tolerance < 1.0))
+    throw ConfigError("triaxial.stress_tolerance", "must lie in (0, 1)");
+  positive(ufr_tolerance, "triaxial.ufr_tolerance");
+  if (prep_step_budget < 1) throw ConfigError("triaxial.prep_step_budget", "must be at least 1");
+  if (stabilise_min_steps < 0) throw ConfigError("triaxial.stabilise_min_steps", "must be >= 0");
+  if (unloading_steps < 0) throw ConfigError("triaxial.unloading_steps", "must be >= 0");
+  if (check_interval < 1) throw ConfigError("triaxial.check_interval", "must be at least 1");
+  ServoGains g{servo_alpha, servo_beta, 1.0};
+  g.validate("triaxial.servo");
+  if (!std::isfinite(shear_servo_strain_rate) || shear_servo_strain_rate < 0.0)
+    throw ConfigError("triaxial.shear_servo_strain_rate", "must be finite and >= 0 (0: 20 * strain_rate)");
+  if (!std::isfinite(dt) || dt < 0.0) throw ConfigError("numerics.dt", "must be finite and >= 0");
+  if (dt == 0.0) positive(dt_factor, "numerics.dt_factor");
+  positive(max_overlap_fraction, "numerics.max_overlap_fraction");
+  if (!(sample_strain > 0.0 && sample_strain <= axial_strain))
+    throw ConfigError("triaxial.sample_strain", "must lie in (0, axial_strain]");
+  if (!(shear_ramp_strain >= 0.0 && shear_ramp_strain < 0.5 * axial_strain))
+    throw ConfigError("triaxial.shear_ramp_strain", "must lie in [0, axial_strain / 2)");
+  if (!(cv_from >= 0.0 && cv_to > cv_from)) throw ConfigError("triaxial.cv_window", "needs 0 <= from < to");
+  if (cv_to > axial_strain + 1e-12)
+    throw ConfigError("triaxial.cv_window", "ends beyond the target axial strain");
+  positive(quasi_static_inertial, "triaxial.quasi_static_inertial");
+  positive(dilatancy_window, "triaxial.dilatancy_window");
+  if (threads < 1) throw ConfigError("threads", "must be at least 1");
+}
+
+Metrics TriaxialResult::metrics() const {
+  // A failed run reports no mechanics: only how far it got.
+  Metrics m{{"ok", outcome.ok() ? 1.0 : 0.0},
+            {"particles", static_cast<double>(particles)},
+            {"steps", static_cast<double>(steps)},
+            {"wall_s", wall_seconds},
+            {"local_damping_used", local_damping_used ? 1.0 : 0.0},
+            {"prep_damping", prep_damping},
+            {"walls_frictionless", walls_frictionless ? 1.0 : 0.0}};
+  if (!outcome.ok()) return m;
+  const Metrics mech{{"phi_peak_deg", phi_peak_deg},
+                     {"eps1_at_peak", eps1_at_peak},
+                     {"phi_cv_deg", phi_cv_deg},
+                     {"phi_cv_se_deg", phi_cv_se_deg},
+                     {"q_peak_pa", q_peak},
+                     {"porosity_initial", porosity_initial},
+                     {"porosity_final", porosity_final},
+                     {"porosity_interior_initial", porosity_interior_initial},
+                     {"porosity_interior_final", porosity_interior_final},
+                     {"eps_v_final", eps_v_final},
+                     {"max_dilatancy_deg", max_dilatancy_deg},
+                     {"max_inertial_number", max_inertial_number},
+                     {"lw_wall_mismatch", lw_wall_mismatch},
+                     {"shear_stress_error_mean", shear_stress_error_mean},
+                     {"shear_stress_error_max", shear_stress_error_max},
+                     {"dt", dt},
+                     {"dt_over_critical", dt_critical > 0 ? dt / dt_critical : 0.0},
+                     {"grain_density", grain_density}};
+  m.insert(m.end(), mech.begin(), mech.end());
+  for (const auto& s : stages) {
+    m.push_back({s.name + ".steps", static_cast<double>(s.steps)});
+    m.push_back({s.name + ".stress_error", s.stress_error});
+    m.push_back({s.name + ".ufr", s.ufr});
+    m.push_back({s.name + ".porosity", s.porosity});
+  }
+  return m;
+}
+
+namespace {
+
+// Walls in this order: x-, x+, y-, y+, z-, z+ (index = 2 * axis + side).
+std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
+  std::vector<Wall> walls;
+  const char* names[3][2] = {{"x-", "x+"}, {"y-", "y+"}, {"z-", "z+"}};
+  for (int a = 0; a < 3; ++a) {
+    for (int s = 0; s < 2; ++s) {
+      Wall w;
+      w.name = names[a][s];
+      w.point = s == 0 ? lo : hi;
+      w.normal = (s == 0 ? 1.0 : -1.0) * Vec3::Unit(a);
+      w.frictional = false;  // smooth, as the seed's
+      w.rolling = false;
+      walls.push_back(w);
+    }
+  }
+  return walls;
+}
+
+class StageFailed : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// The running test: world, servos and the measurements the stages share.
+struct Rig {
+  World& world;
+  const TriaxialConfig& cfg;
+  Observer* obs;
+  double vs;  // solid volume
+  std::array<ServoWall, 6> servo{};
+  std::string stage;
+  double target_p = 0.0;  // what the servo-held walls are asked for now [Pa]
+
+  double length(int a) const { return world.walls()[2 * a + 1].point[a] - world.walls()[2 * a].point[a]; }
+  Vec3 lengths() const { return {length(0), length(1), length(2)}; }
+  double area(int a) const { return length((a + 1) % 3) * length((a + 2) % 3); }
+  double face_stress(int f) const { return ServoWall::normal_force(world.walls()[f]) / area(f / 2); }
+  double axis_stress(int a) const { return 0.5 * (face_stress(2 * a) + face_stress(2 * a + 1)); }
+  double porosity() const { return 1.0 - vs / lengths().prod(); }
+  double mean_stress() const { return (axis_stress(0) + axis_stress(1) + axis_stress(2)) / 3.0; }
+  double stress_error(int first_face, int last_face) const {
+    double e = 0.0;
+    for (int f = first_face; f <= last_face; ++f)
+      e = std::max(e, std::abs(face_stress(f) - target_p) / target_p);
+    return e;
+  }
+  void servo_faces(int first_face, int last_face, const ServoGains& g) {
+    for (int f = first_face; f <= last_face; ++f)
+      servo[f].update(world.walls()[f], target_p * area(f / 2), world.dt(), g);
+  }
+  void stop_walls() {
+    for (auto& w : world.walls()) w.velocity.setZero();
+    for (auto& s : servo) s.reset();
+  }
+  // Interior measurement volume: the box shrunk by d_max from every wall.
+  Region interior() const {
+    Region r;
+    const double m = cfg.material.d_max;
+    for (int a = 0; a < 3; ++a) {
+      r.lo[a] = world.walls()[2 * a].point[a] + m;
+      r.hi[a] = world.walls()[2 * a + 1].point[a] - m;
+    }
+    return r;
+  }
+  StageReport report(const std::string& name, long steps0, bool converged, double err) const {
+    StageReport s;
+    s.name = name;
+    s.converged = converged;
+    s.steps = world.step_count() - steps0;
+    s.time_s = s.steps * world.dt();
+    s.stress_error = err;
+    s.ufr = unbalanced_force_ratio(world);
+    s.porosity = porosity();
+    s.mean_stress = mean_stress();
+    return s;
+  }
+};
+
+// Volume of the part of a sphere of radius r on the far side of a plane at
+// distance h from its centre (h >= r: none, h <= -r: all).
+double cap_volume(double r, double h) {
+  if (h >= r) return 0.0;
+  if (h <= -r) return sphere_volume(r);
+  const double t = r - h;  // cap height
+  return kPi * t * t * (3.0 * r - t) / 3.0;
+}
+
+// Solid volume inside `region` (spheres cut by its faces; a sphere cut by two
+// faces at once, near an edge, is approximated by subtracting both caps) and the
+// full volume of the grains whose centres lie inside.
+void interior_solid(const Particles& p, const Region& reg, double& solid_in, double& vp_centres_in) {
+  solid_in = 0.0;
+  vp_centres_in = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double r = p.r[i];
+    const Vec3& x = p.x[i];
+    if (reg.contains(x)) vp_centres_in += sphere_volume(r);
+    double v = sphere_volume(r);
+    for (int a = 0; a < 3; ++a) {
+      v -= cap_volume(r, x[a] - reg.lo[a]);   // part below lo
+      v -= cap_volume(r, reg.hi[a] - x[a]);   // part above hi
+    }
+    solid_in += std::max(0.0, v);
+  }
+}
+
+// Love-Weber stress in the seed's form (Eq. 2.7): (1 - n) / sum V_p * sum_p sum_c,
+// with n the porosity of the measurement volume itself and the sum over grains
+// whose centres lie in it. Counting grains by their centres is biased where the
+// region's faces cut the layering near the walls; the (1 - n) / sum V_p weight
+// removes that bias. Also returns the porosity of the region.
+Mat3 interior_stress(const World& w, const Region& reg, double& porosity_in) {
+  double solid_in = 0.0, vp_in = 0.0;
+  interior_solid(w.particles(), reg, solid_in, vp_in);
+  porosity_in = 1.0 - solid_in / reg.volume();
+  const Mat3 plain = love_weber_stress(w, reg);  // sum / V
+  return vp_in > 0.0 ? Mat3(plain * (solid_in / vp_in)) : plain;
+}
+
+double kinetic_energy(const Particles& p) {
+  double e = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.fixed[i]) continue;
+    e += 0.5 * p.m[i] * p.v[i].squaredNorm() + 0.5 * (0.4 * p.m[i] * p.r[i] * p.r[i]) * p.w[i].squaredNorm();
+  }
+  return e;
+}
+
+std::string fmt(double v, int prec = 4) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
+
+// Servo all six walls to p0 until equilibrium (two consecutive passing checks).
+// With ramp_steps > 0 the target goes geometrically from the present target to
+// target_p over that many steps first.
+StageReport servo_to_equilibrium(Rig& rig, const std::string& name, double target_p, const ServoGains& g,
+                                 double prog0, double prog1, long ramp_steps = 0) {
+  const TriaxialConfig& cfg = rig.cfg;
+  World& w = rig.world;
+  rig.stage = name;
+  const double p_from = rig.target_p;
+  rig.target_p = target_p;
+  if (rig.obs) rig.obs->on_stage(name);
+  const long s0 = w.step_count();
+  w.refresh();
+  int passes = 0;
+  double err = 0.0, ufr = 0.0;
+  while (w.step_count() - s0 < cfg.prep_step_budget) {
+    const long done = w.step_count() - s0;
+    if (done < ramp_steps)
+      rig.target_p = p_from * std::pow(target_p / p_from, static_cast<double>(done) / static_cast<double>(ramp_steps));
+    else
+      rig.target_p = target_p;
+    rig.servo_faces(0, 5, g);
+    w.step();
+    if ((w.step_count() - s0) % cfg.check_interval != 0 || w.step_count() - s0 <= ramp_steps) continue;
+    err = rig.stress_error(0, 5);
+    ufr = unbalanced_force_ratio(w);
+    passes = (err < cfg.stress_tolerance && ufr < cfg.ufr_tolerance) ? passes + 1 : 0;
+    if (rig.obs)
+      rig.obs->on_progress(prog0 + (prog1 - prog0) * static_cast<double>(w.step_count() - s0) /
+                                       static_cast<double>(cfg.prep_step_budget));
+    if (passes >= 2) {
+      rig.stop_walls();
+      return rig.report(name, s0, true, err);
+    }
+  }
+  rig.stop_walls();
+  StageReport r = rig.report(name, s0, false, rig.stress_error(0, 5));
+  throw StageFailed("stage " + name + " did not reach equilibrium within its budget of " +
+                    std::to_string(cfg.prep_step_budget) + " steps: wall stress error " + fmt(r.stress_error) +
+                    " (tolerance " + fmt(cfg.stress_tolerance) + "), unbalanced-force ratio " + fmt(r.ufr) +
+                    " (tolerance " + fmt(cfg.ufr_tolerance) + "), mean stress " + fmt(r.mean_stress) +
+                    " Pa for a target of " + fmt(target_p) + " Pa, porosity " + fmt(r.porosity));
+}
+
+// Walls held still; run until the unbalanced-force ratio passes (dense step ii).
+StageReport stabilise(Rig& rig, const std::string& name) {
+  const TriaxialConfig& cfg = rig.cfg;
+  World& w = rig.world;
+  rig.stage = name;
+  if (rig.obs) rig.obs->on_stage(name);
+  rig.stop_walls();
+  const long s0 = w.step_count();
+  w.refresh();
+  int passes = 0;
+  while (w.step_count() - s0 < cfg.prep_step_budget) {
+    w.step();
+    const long done = w.step_count() - s0;
+    if (done % cfg.check_interval != 0 || done < cfg.stabilise_min_steps) continue;
+    passes = unbalanced_force_ratio(w) < cfg.ufr_tolerance ? passes + 1 : 0;
+    if (passes >= 2) return rig.report(name, s0, true, rig.stress_error(0, 5));
+  }
+  StageReport r = rig.report(name, s0, false, rig.stress_error(0, 5));
+  throw StageFailed("stage " + name + " did not stabilise within its budget of " +
+                    std::to_string(cfg.prep_step_budget) + " steps: unbalanced-force ratio " + fmt(r.ufr) +
+                    " (tolerance " + fmt(cfg.ufr_tolerance) + ")");
+}
+
+}  // namespace
+
+TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
+  cfg.validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  TriaxialResult res;
+  res.packing = to_string(cfg.packing);
+  res.threads = cfg.threads;
+  res.walls = "six smooth rigid walls (frictionless: normal force only); z axial, x and y lateral; servo-controlled";
+  res.walls_frictionless = true;
+  res.prep_damping = cfg.prep_damping;
+  res.local_damping_used = cfg.prep_damping > 0.0;
+  res.grain_density = cfg.grain_density();
+  res.series.name = "triaxial";
+  res.series.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
+                        "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
+                        "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step"};
+
+  // Sample: diameters uniform in [d_min, d_max], random insertion at a low solid fraction.
+  const Material& mat = cfg.material;
+  std::mt19937_64 rng(cfg.seed);
+  std::vector<double> radii = sample_radii(cfg.particles, mat.d_min, mat.d_max, rng);
+  double vs = 0.0, dsum = 0.0;
+  for (double r : radii) {
+    vs += sphere_volume(r);
+    dsum += 2.0 * r;
+  }
+  res.d_mean = dsum / static_cast<double>(radii.size());
+  res.particles = static_cast<long>(radii.size());
+  const double width = std::cbrt(vs / (cfg.initial_solid_fraction * cfg.aspect_ratio));
+  const Vec3 lo = Vec3::Zero(), hi(width, width, width * cfg.aspect_ratio);
+  Particles p;
+  insert_random(p, radii, lo, hi, cfg.grain_density(), rng);
+
+  double m_min = 1e300;
+  for (double m : p.m) m_min = std::min(m_min, m);
+  WorldOptions opt;
+  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, mat.kn);
+  opt.threads = cfg.threads;
+  opt.max_overlap_fraction = cfg.max_overlap_fraction;
+  opt.local_damping = cfg.prep_damping;
+  Domain dom;
+  dom.lo = lo;
+  dom.hi = hi;
+
+  const ContactParams target = contact_params(mat);
+  ContactParams smooth = target;  // dense step (i): theta = eta = 0
+  smooth.ks = 0.0;
+  smooth.tan_theta = 0.0;
+  smooth.eta = 0.0;
+  // The time step is checked against the target law (the stiffest one used).
+  World world(std::move(p), box_walls(lo, hi), dom, target, opt);
+  {
+    const StabilityLimits lim = stability_limits(world);
+    res.dt = opt.dt;
+    res.dt_critical = lim.governing().dt_critical;
+    res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
+  }
+  if (cfg.packing == Packing::dense) world.set_contact_params(smooth);
+
+  Rig rig{world, cfg, obs, vs, {}, "", cfg.confining_pressure};
+  const ServoGains prep_gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * cfg.prep_strain_rate * width};
+
+  auto finish = [&]() {
+    res.steps = world.step_count();
+    res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+
+  try {
+    // ---- preparation
+    if (cfg.packing == Packing::dense) {
+      const double p0 = cfg.confining_pressure, pf = cfg.prep_pressure_factor;
+      res.stages.push_back(servo_to_equilibrium(rig, "isotropic_compression", pf * p0, prep_gains, 0.0, 0.1));
+      rig.target_p = pf * p0;
+      if (pf != 1.0)
+        res.stages.push_back(servo_to_equilibrium(rig, "unloading", p0, prep_gains, 0.1, 0.15, cfg.unloading_steps));
+      world.set_contact_params(target);
+      res.stages.push_back(stabilise(rig, "stabilise"));
+      res.stages.push_back(servo_to_equilibrium(rig, "recompression", cfg.confining_pressure, prep_gains, 0.15, 0.3));
+    } else {
+      res.stages.push_back(
+          servo_to_equilibrium(rig, "isotropic_compression", cfg.confining_pressure, prep_gains, 0.0, 0.3));
+    }
+    world.set_local_damping(0.0);  // preparation only
+
+    // ---- deviatoric stage
+    rig.stage = "shear";
+    rig.target_p = cfg.confining_pressure;
+    if (obs) obs->on_stage("shear");
+    const long s0 = world.step_count();
+    const double t_shear0 = world.time();
+    const Vec3 L0 = rig.lengths();
+    const double V0 = L0.prod();
+    for (int a = 0; a < 3; ++a) res.sample_size[a] = L0[a];
+    res.porosity_initial = rig.porosity();
+    {
+      double n_in = 0.0;
+      const Mat3 lw = interior_stress(world, rig.interior(), n_in);
+      res.porosity_interior_initial = n_in;
+      const double p_walls = rig.mean_stress();
+      res.lw_wall_mismatch = std::abs(lw.trace() / 3.0 - p_walls) / p_walls;
+    }
+    // Top and bottom walls: constant speed 0.5 * rate * L0 each, reached by a
+    // linear ramp in time over the first shear_ramp_strain (a sudden start hits
+    // the heavy, stiff grains like an impact and shows up as a false peak).
+    const double v_axial = 0.5 * cfg.strain_rate * L0[2];
+    const double t_ramp = 2.0 * cfg.shear_ramp_strain / cfg.strain_rate;
+    auto set_axial_speed = [&]() {
+      const double t = world.time() - t_shear0;
+      const double v = t_ramp > 0.0 ? v_axial * std::min(1.0, (t + world.dt()) / t_ramp) : v_axial;
+      world.walls()[4].velocity = v * world.walls()[4].normal;
+      world.walls()[5].velocity = v * world.walls()[5].normal;
+    };
+    const double lat_rate = cfg.shear_servo_strain_rate > 0 ? cfg.shear_servo_strain_rate : 20.0 * cfg.strain_rate;
+    const ServoGains shear_gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * lat_rate * std::max(L0[0], L0[1])};
+    const double rho = cfg.grain_density();
+
+    double err_sum = 0.0;
+    long err_n = 0;
+    auto sample = [&]() {
+      const Vec3 L = rig.lengths();
+      const double e1 = (L0[2] - L[2]) / L0[2], e2 = (L0[0] - L[0]) / L0[0], e3 = (L0[1] - L[1]) / L0[1];
+      const double ev = (V0 - L.prod()) / V0;
+      const double s1 = rig.axis_stress(2), s2 = rig.axis_stress(0), s3 = rig.axis_stress(1);
+      const double s3m = 0.5 * (s2 + s3);
+      const double pm = (s1 + s2 + s3) / 3.0, q = s1 - s3m;
+      const double ratio = (s1 + s3m) > 0 ? (s1 - s3m) / (s1 + s3m) : 0.0;
+      double n_in = 0.0;
+      const Mat3 lw = interior_stress(world, rig.interior(), n_in);
+      const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
+      const Coordination z = coordination(world);
+      const double ufr = unbalanced_force_ratio(world);
+      const double inertial = pm > 0 ? cfg.strain_rate * res.d_mean * std::sqrt(rho / pm) : INFINITY;
+      for (int f = 0; f < 4; ++f) {
+        const double e = std::abs(rig.face_stress(f) - cfg.confining_pressure) / cfg.confining_pressure;
+        if (world.step_count() > s0) {
+          err_sum += e;
+          ++err_n;
+          res.shear_stress_error_max = std::max(res.shear_stress_error_max, e);
+        }
+      }
+      res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
+                      rad_to_deg(std::asin(std::clamp(ratio, -1.0, 1.0))), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
+                      z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
+                      static_cast<double>(world.step_count())},
+                     obs);
+      return e1;
+    };
+
+    world.refresh();
+    sample();
+    double next = cfg.sample_strain;
+    const double dstrain = cfg.strain_rate * world.dt();  // per step
+    const long est_steps = static_cast<long>(std::ceil(cfg.axial_strain / dstrain));
+    const long budget = est_steps + est_steps / 10 + static_cast<long>(t_ramp / world.dt()) + 100;
+    double e1 = 0.0;
+    while (e1 < cfg.axial_strain - 1e-12) {
+      if (world.step_count() - s0 > budget)
+        throw StageFailed("shear did not reach the target axial strain within " + std::to_string(budget) + " steps");
+      rig.servo_faces(0, 3, shear_gains);
+      set_axial_speed();
+      world.step();
+      e1 = (L0[2] - rig.length(2)) / L0[2];
+      if (e1 >= next - 0.5 * dstrain || e1 >= cfg.axial_strain - 1e-12) {
+        sample();
+        next += cfg.sample_strain;
+        if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
+      }
+    }
+    rig.stop_walls();
+    res.shear_stress_error_mean = err_n ? err_sum / static_cast<double>(err_n) : 0.0;
+    {
+      StageReport sr = rig.report("shear", s0, true, rig.stress_error(0, 3));
+      res.stages.push_back(sr);
+    }
+  } catch (const InstabilityError& e) {
+    res.outcome.status = SceneStatus::unstable;
+    res.outcome.failed_stage = rig.stage;
+    res.outcome.message = std::string("stage ") + rig.stage + ": " + e.what();
+    finish();
+    return res;
+  } catch (const StageFailed& e) {
+    res.outcome.status = SceneStatus::not_converged;
+    res.outcome.failed_stage = rig.stage;
+    res.outcome.message = e.what();
+    finish();
+    return res;
+  }
+
+  // ---- metrics from the series
+  const Series& s = res.series;
+  const std::size_t c_e1 = s.column("eps1"), c_ev = s.column("eps_v"), c_s1 = s.column("sigma1"),
+                    c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3"), c_q = s.column("q"),
+                    c_n = s.column("porosity"), c_in = s.column("inertial");
+  auto ratio = [&](const std::vector<double>& r) {
+    const double s3m = 0.5 * (r[c_s2] + r[c_s3]);
+    return (r[c_s1] - s3m) / (r[c_s1] + s3m);
+  };
+  double best = -1.0;
+  std::vector<double> cv;
+  for (const auto& r : s.rows) {
+    const double x = ratio(r);
+    if (x > best) {
+      best = x;
+      res.eps1_at_peak = r[c_e1];
+      res.q_peak = r[c_q];
+    }
+    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) cv.push_back(x);
+    res.max_inertial_number = std::max(res.max_inertial_number, r[c_in]);
+  }
+  res.phi_peak_deg = rad_to_deg(std::asin(std::clamp(best, -1.0, 1.0)));
+  res.cv_samples = static_cast<int>(cv.size());
+  if (!cv.empty()) {
+    double mean = 0.0;
+    for (double x : cv) mean += x;
+    mean /= static_cast<double>(cv.size());
+    res.phi_cv_deg = rad_to_deg(std::asin(std::clamp(mean, -1.0, 1.0)));
+    // Successive rows are correlated: the standard error comes from block means.
+    const std::size_t nb = std::min<std::size_t>(10, cv.size() / 3);
+    if (nb >= 2) {
+      const std::size_t bs = cv.size() / nb;
+      std::vector<double> bm(nb, 0.0);
+      for (std::size_t b = 0; b < nb; ++b) {
+        for (std::size_t k = 0; k < bs; ++k) bm[b] += cv[b * bs + k];
+        bm[b] /= static_cast<double>(bs);
+      }
+      double bmean = 0.0, var = 0.0;
+      for (double x : bm) bmean += x / static_cast<double>(nb);
+      for (double x : bm) var += (x - bmean) * (x - bmean) / static_cast<double>(nb - 1);
+      const double se_ratio = std::sqrt(var / static_cast<double>(nb));
+      res.phi_cv_se_deg = rad_to_deg(se_ratio / std::sqrt(std::max(1e-12, 1.0 - mean * mean)));
+    }
+  } else {
+    res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
+    res.phi_cv_deg = NAN;
+  }
+  res.porosity_final = s.rows.back()[c_n];
+  res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
+  res.eps_v_final = s.rows.back()[c_ev];
+  res.max_dilatancy_deg = -90.0;
+  for (std::size_t i = 0; i < s.rows.size(); ++i) {
+    for (std::size_t j = i + 1; j < s.rows.size(); ++j) {
+      const double de1 = s.rows[j][c_e1] - s.rows[i][c_e1];
+      if (de1 < cfg.dilatancy_window - 1e-9) continue;
+      const double dev = s.rows[j][c_ev] - s.rows[i][c_ev];
+      const double x = -dev / (2.0 * de1 - dev);
+      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))));
+      break;
+    }
+  }
+  if (res.max_inertial_number > cfg.quasi_static_inertial)
+    res.outcome.warnings.push_back("quasi-static warning: largest inertial number " + fmt(res.max_inertial_number) +
+                                   " exceeds " + fmt(cfg.quasi_static_inertial));
+  if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
+    res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
+                                   fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");
+  for (const auto& w : res.outcome.warnings) res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + w;
+  finish();
+  if (obs) obs->on_progress(1.0);
+  return res;
+}
+
+}  // namespace demcal::engine

@@ -1,0 +1,149 @@
+#pragma once
+// Drained triaxial test of the seed's Sec. 2.2.3 (Figs. 2.7-2.12, Tables 2.2, 2.3).
+//
+// A polydisperse sample is generated without overlaps (random insertion at a low
+// solid fraction) in a box of six smooth, rigid walls; z is the axial direction.
+//
+// Preparation (isotropic, every wall servo-held at p0, temporary local damping):
+//  loose  "isotropic_compression": compression with the target theta, eta;
+//  dense  "isotropic_compression": compression with theta = eta = 0 to p0 and
+//         equilibrium (to prep_pressure_factor * p0, then "unloading" to p0); "stabilise": walls held still, target theta, eta switched
+//         on, run until the unbalanced force ratio is small; "recompression":
+//         servo compression to p0 and equilibrium again (the seed's three steps).
+// Equilibrium = every wall's stress error below stress_tolerance and the
+// unbalanced-force ratio below ufr_tolerance, on two consecutive checks. A stage
+// that does not get there within its step budget ends the run: not_converged with
+// the stage named, never a result.
+//
+// Deviatoric ("shear"): damping off; top and bottom walls move at a constant
+// engineering axial strain rate (relative to the height at the start of shear),
+// lateral walls servo-held at sigma3 = p0, until the target axial strain.
+//
+// Sign conventions: compression positive for stresses and strains; strains are
+// engineering strains from the lengths at the start of shear; eps_v = -dV/V0.
+// sigma_i from walls: compressive normal force / current face area (face area from
+// the current positions of the perpendicular walls). sigma1 = axial (z), sigma2 =
+// x walls, sigma3 = y walls; phi_mob = asin((s1 - s3m)/(s1 + s3m)) with s3m the
+// mean of the two lateral stresses.
+#include "../material.hpp"
+#include "../observer.hpp"
+#include "scene_status.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace demcal::engine {
+
+// The seed's Table 2.1 with theta = 30 deg, b = 1, eta = 0.1.
+Material triaxial_seed_material();
+
+enum class Packing { dense, loose };
+const char* to_string(Packing p);
+
+struct TriaxialConfig {
+  Material material = triaxial_seed_material();
+  std::size_t particles = 2000;
+  Packing packing = Packing::dense;
+  double confining_pressure = 100e3;  // p0 [Pa]
+  double strain_rate = 1e-4;          // axial, engineering [1/s]
+  double axial_strain = 0.30;         // target eps1
+  double shear_ramp_strain = 0.001;   // the axial rate ramps up linearly over this much eps1
+  // Grain density for this quasi-static run. The seed scales the density up TO
+  // 2.65e12 kg/m^3 (Sec. 2.2.3.1); density_scale > 0 instead multiplies
+  // material.density by that factor (scaled_density is then ignored).
+  double scaled_density = 2.65e12;
+  double density_scale = 0.0;
+  double aspect_ratio = 1.0;             // initial box height / width
+  double initial_solid_fraction = 0.30;  // random insertion (<= 0.4)
+
+  // Preparation
+  double prep_damping = 0.3;          // local damping, preparation only (0: none)
+  // Dense step (i) compresses the frictionless sample to this multiple of p0, then
+  // unloads it to p0 ("unloading"): stiff grains (Kn / (p0 d) = 2e5) rearrange
+  // sqrt(factor) times faster in steps at the higher pressure; a frictionless
+  // packing keeps its structure when unloaded. 1: straight to p0.
+  double prep_pressure_factor = 100.0;
+  long unloading_steps = 20000;       // geometric ramp of the unloading target
+  double prep_strain_rate = 0.02;     // wall speed cap in preparation, as (2 v / L) [1/s]
+  double stress_tolerance = 0.01;     // |sigma_wall - p0| / p0 on every wall
+  double ufr_tolerance = 0.01;        // unbalanced-force ratio
+  long prep_step_budget = 400000;     // per preparation stage
+  long stabilise_min_steps = 2000;    // dense step (ii): at least this many steps
+  long check_interval = 250;          // steps between equilibrium checks
+
+  // Servo walls
+  double servo_alpha = 0.5;
+  double servo_beta = 0.02;
+  double shear_servo_strain_rate = 0.0;  // lateral wall speed cap in shear, as 2v/L; 0: 20 * strain_rate
+
+  // Numerics
+  double dt = 0.0;          // [s]; 0: dt_factor * sqrt(m_min / Kn), m_min after density scaling
+  double dt_factor = 0.3;
+  double max_overlap_fraction = 0.25;
+
+  // Output
+  double sample_strain = 0.001;              // series row every this much eps1
+  double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
+  double quasi_static_inertial = 1e-3;       // warn above this inertial number
+  double dilatancy_window = 0.01;            // eps1 span of the dilatancy-angle difference
+
+  std::uint64_t seed = 1;
+  int threads = 1;
+
+  void validate() const;  // throws ConfigError naming the field
+  double grain_density() const { return density_scale > 0.0 ? material.density * density_scale : scaled_density; }
+};
+
+// How close a stage got to equilibrium when it ended.
+struct StageReport {
+  std::string name;
+  bool converged = false;   // prep stages: the equilibrium test passed; shear: reached the strain
+  long steps = 0;
+  double time_s = 0;        // simulated
+  double stress_error = 0;  // max over servo-held walls of |sigma - target| / p0 at the end
+  double ufr = 0;           // unbalanced-force ratio at the end
+  double porosity = 0;      // at the end
+  double mean_stress = 0;   // p from the walls at the end [Pa]
+};
+
+struct TriaxialResult {
+  SceneOutcome outcome;
+
+  // Metrics (meaningful only when outcome.ok())
+  double phi_peak_deg = 0, eps1_at_peak = 0;
+  double phi_cv_deg = 0, phi_cv_se_deg = 0;  // standard error from block means over the window
+  int cv_samples = 0;
+  double q_peak = 0;                // [Pa]
+  double porosity_initial = 0;      // after preparation (start of shear)
+  double porosity_final = 0;
+  double porosity_interior_initial = 0, porosity_interior_final = 0;  // of the Love-Weber volume
+  double eps_v_final = 0;           // compression positive; dilation < 0
+  double max_dilatancy_deg = 0;     // max of asin(-deps_v / (2 deps1 - deps_v))
+  double max_inertial_number = 0;
+  double lw_wall_mismatch = 0;      // |p_LW - p_walls| / p_walls at the start of shear
+  double shear_stress_error_mean = 0, shear_stress_error_max = 0;  // lateral walls during shear
+
+  // Set-up, recorded
+  std::string packing;
+  long particles = 0;
+  double grain_density = 0, dt = 0, dt_critical = 0;
+  std::string critical_mode;
+  double d_mean = 0;
+  bool local_damping_used = false;
+  double prep_damping = 0;
+  bool walls_frictionless = true;   // the seed's walls are smooth: normal force only
+  std::string walls;                // words
+  double sample_size[3] = {0, 0, 0};  // box edges at the start of shear [m]
+  std::vector<StageReport> stages;
+  long steps = 0;
+  double wall_seconds = 0;
+  int threads = 1;
+
+  Series series;  // see the column list in triaxial.cpp
+  Metrics metrics() const;
+};
+
+TriaxialResult run_triaxial(const TriaxialConfig& config, Observer* observer = nullptr);
+
+}  // namespace demcal::engine

@@ -1,0 +1,229 @@
+// The repose scene (seed Sec. 2.2.4) and its profile measurement.
+#include "engine/errors.hpp"
+#include "engine/packing.hpp"
+#include "engine/repose_profile.hpp"
+#include "engine/scenes/repose.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+using namespace demcal::engine;
+
+namespace {
+
+// A heap sloping down towards +x at `angle_deg`: crest plateau up to x_crest,
+// height h0 there, toe where the line meets the floor.
+double heap_height(double x, double angle_deg, double h0, double x_crest) {
+  if (x <= x_crest) return h0;
+  return std::max(0.0, h0 - std::tan(deg_to_rad(angle_deg)) * (x - x_crest));
+}
+
+// Small, soft, cheap column: a few hundred grains, stiffness scaled down 1000x
+// (overlaps stay below 2 % of a radius under this column's weight and impacts).
+ReposeConfig cheap(double theta_deg, double eta) {
+  ReposeConfig c;
+  c.material.friction_angle = deg_to_rad(theta_deg);
+  c.material.rolling_eta = eta;
+  c.column_width = 0.015;
+  c.column_height = 0.015;
+  c.slab_depth_diameters = 3.0;
+  c.stiffness_scale = 1e-3;
+  c.time_limit = 1.5;
+  c.seed = 7;
+  c.threads = 1;
+  return c;
+}
+
+void report(const char* label, const ReposeResult& r) {
+  std::printf("[ report   ] %s: status %s, repose %.1f +- %.1f deg, steepest %.1f deg, runout ratio %.2f, "
+              "height %.4f m, rest at %.3f s, %ld grains, %.1f s wall\n",
+              label, to_string(r.outcome.status), r.repose_deg, r.repose_fit_err_deg, r.steepest_deg,
+              r.runout_ratio, r.final_height_m, r.time_to_rest_s, r.particles, r.wall_seconds);
+}
+
+}  // namespace
+
+// ---- profile measurement: pure functions ----------------------------------
+
+TEST(ReposeProfile, LineThroughTriangularHeapRecoversItsSlope) {
+  for (double angle : {15.0, 31.3, 45.0}) {
+    std::vector<double> x, h;
+    for (double xi = 0.0005; xi < 0.15; xi += 0.001) {
+      x.push_back(xi);
+      h.push_back(heap_height(xi, angle, 0.03, 0.02));
+    }
+    const SlopeFit f = fit_slope(x, h, 0.2, 0.8);
+    ASSERT_TRUE(f.ok) << f.why;
+    EXPECT_NEAR(f.angle_deg, angle, 1e-6);
+    EXPECT_LT(f.slope, 0.0);
+    EXPECT_NEAR(f.h_max, 0.03, 1e-12);
+    EXPECT_LT(f.angle_err_deg, 1e-6);
+    EXPECT_NEAR(steepest_angle_deg(x, h, f.x_upper, f.x_lower, 5), angle, 1e-6);
+  }
+}
+
+TEST(ReposeProfile, HeapBuiltOfGrainsGivesItsSlopeWithinHalfADegree) {
+  // Polydisperse grains (d in [1, 2] mm) filling a 31.3 deg heap 40 mm high: each
+  // column of the heap is stacked from the floor up until the next grain would
+  // stick out of the surface line. The profile is the grains' upper envelope.
+  const double angle = 31.3, h0 = 0.04, x_crest = 0.02;
+  std::mt19937_64 rng(3);
+  std::vector<Vec3> pos;
+  std::vector<double> rad;
+  for (double x = 0.001; x < 0.12; x += 0.0015) {
+    for (double y = 0.001; y < 0.006; y += 0.002) {
+      const double xs = x + uniform(rng, -0.0003, 0.0003);
+      const double top = heap_height(xs, angle, h0, x_crest);
+      double z = 0.0;
+      while (true) {
+        const double r = 0.5 * uniform(rng, 0.001, 0.002);
+        if (z + 2 * r > top) break;
+        pos.push_back(Vec3(xs, y, z + r));
+        rad.push_back(r);
+        z += 2 * r;
+      }
+    }
+  }
+  const SurfaceProfile prof = surface_profile(pos, rad, nullptr, 0.0, 0.12, 0.0015, 0.0);
+  const SlopeFit f = fit_slope(prof.x, prof.h, 0.2, 0.8);
+  ASSERT_TRUE(f.ok) << f.why;
+  std::printf("[ report   ] grain heap of %.1f deg: fitted %.2f +- %.2f deg over %d bins, steepest %.1f deg\n", angle,
+              f.angle_deg, f.angle_err_deg, f.points,
+              steepest_angle_deg(prof.x, prof.h, f.x_upper, f.x_lower, 5));
+  EXPECT_NEAR(f.angle_deg, angle, 0.5);
+  EXPECT_GT(f.points, 20);
+  EXPECT_GT(f.angle_err_deg, 0.0);
+}
+
+TEST(ReposeProfile, FitExcludesCrestAndToe) {
+  // A heap with a steep 60 deg lip at the crest and a flat 5 deg toe apron: the
+  // 0.2-0.8 band only sees the 30 deg flank.
+  std::vector<double> x, h;
+  for (double xi = 0.0005; xi < 0.2; xi += 0.001) {
+    double hi;
+    if (xi < 0.01) hi = 0.05;
+    else if (xi < 0.01 + 0.005 / std::tan(deg_to_rad(60))) hi = 0.05 - std::tan(deg_to_rad(60)) * (xi - 0.01);
+    else {
+      const double x1 = 0.01 + 0.005 / std::tan(deg_to_rad(60));
+      hi = 0.045 - std::tan(deg_to_rad(30)) * (xi - x1);
+      if (hi < 0.006) {
+        const double x2 = x1 + (0.045 - 0.006) / std::tan(deg_to_rad(30));
+        hi = std::max(0.0, 0.006 - std::tan(deg_to_rad(5)) * (xi - x2));
+      }
+    }
+    x.push_back(xi);
+    h.push_back(hi);
+  }
+  const SlopeFit f = fit_slope(x, h, 0.2, 0.8);
+  ASSERT_TRUE(f.ok);
+  EXPECT_NEAR(f.angle_deg, 30.0, 0.3);
+}
+
+TEST(ReposeProfile, FrontIgnoresDetachedBouncers) {
+  std::vector<Vec3> pos;
+  std::vector<double> rad;
+  for (int i = 0; i < 40; ++i) {  // a deposit up to x = 0.04 m
+    pos.push_back(Vec3(0.001 * i + 0.0005, 0.0, 0.002));
+    rad.push_back(0.0005);
+  }
+  pos.push_back(Vec3(0.07, 0.0, 0.0005));  // a lone grain far ahead
+  rad.push_back(0.0005);
+  const SurfaceProfile prof = surface_profile(pos, rad, nullptr, 0.0, 0.1, 0.001, 0.0);
+  const Front f = deposit_front(prof, 0, 0.0004, 3, &pos, &rad);
+  EXPECT_NEAR(f.x, 0.04, 1e-9);
+  const Front g = deposit_front(prof, 0, 0.0004, 40, &pos, &rad);  // gap allowed: the grain counts
+  EXPECT_NEAR(g.x, 0.0705, 1e-9);
+}
+
+TEST(ReposeProfile, TooFewPointsIsNoFit) {
+  const SlopeFit f = fit_slope({0.0, 0.001}, {0.01, 0.0}, 0.2, 0.8);
+  EXPECT_FALSE(f.ok);
+  EXPECT_FALSE(f.why.empty());
+}
+
+// ---- config -------------------------------------------------------------------
+
+TEST(ReposeConfig, ValidateNamesTheField) {
+  auto field_of = [](ReposeConfig c) {
+    try {
+      c.validate();
+    } catch (const ConfigError& e) {
+      return e.field();
+    }
+    return std::string("none");
+  };
+  ReposeConfig ok;
+  EXPECT_EQ(field_of(ok), "none");
+  ReposeConfig c = ok;
+  c.column_width = -1;
+  EXPECT_EQ(field_of(c), "repose.column_width");
+  c = ok;
+  c.slab_depth_diameters = 1.0;  // periodic images would touch
+  EXPECT_EQ(field_of(c), "repose.slab_depth_diameters");
+  c = ok;
+  c.stiffness_scale = 2.0;
+  EXPECT_EQ(field_of(c), "numerics.stiffness_scale");
+  c = ok;
+  c.fit_lo = 0.9;
+  EXPECT_EQ(field_of(c), "repose.fit_fractions");
+  c = ok;
+  c.time_limit = 0;
+  EXPECT_EQ(field_of(c), "repose.time_limit");
+  c = ok;
+  c.collapse_drag = -1.0;
+  EXPECT_EQ(field_of(c), "repose.collapse_drag");
+  c = ok;
+  c.threads = 0;
+  EXPECT_EQ(field_of(c), "threads");
+}
+
+// ---- the scene, small and soft -------------------------------------------------
+
+TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
+  ReposeConfig c = cheap(30.0, 0.1);
+  c.time_limit = 0.03;  // the column is still falling
+  const ReposeResult r = run_repose(c);
+  EXPECT_EQ(r.outcome.status, SceneStatus::not_settled);
+  EXPECT_EQ(r.outcome.failed_stage, "collapse");
+  EXPECT_FALSE(r.outcome.message.empty());
+  for (const auto& [k, v] : r.metrics()) {
+    EXPECT_NE(k, "repose_deg");
+    EXPECT_NE(k, "runout_m");
+  }
+  EXPECT_FALSE(r.energy.rows.empty());
+}
+
+TEST(ReposeScene, FrictionRaisesTheAngleAndRollingResistanceRaisesItFurther) {
+  // theta = eta = 0 dissipates nothing in the seed's law; a background viscous
+  // drag in the collapse lets it come to rest (recorded as collapse_drag).
+  ReposeConfig c0 = cheap(0.0, 0.0);
+  c0.collapse_drag = 15.0;
+  c0.time_limit = 2.5;
+  const ReposeResult r0 = run_repose(c0);
+  report("theta 0, eta 0  ", r0);
+  const ReposeResult r1 = run_repose(cheap(30.0, 0.0));
+  report("theta 30, eta 0 ", r1);
+  const ReposeResult r2 = run_repose(cheap(30.0, 0.3));
+  report("theta 30, eta .3", r2);
+
+  ASSERT_TRUE(r0.outcome.ok()) << r0.outcome.message;
+  ASSERT_TRUE(r1.outcome.ok()) << r1.outcome.message;
+  ASSERT_TRUE(r2.outcome.ok()) << r2.outcome.message;
+  EXPECT_LT(r0.repose_deg, 15.0);
+  EXPECT_GT(r0.runout_ratio, r1.runout_ratio);
+  EXPECT_GT(r0.runout_ratio, 1.5);
+  EXPECT_GT(r1.repose_deg, r0.repose_deg + 5.0);
+  EXPECT_GT(r2.repose_deg, r1.repose_deg);
+  EXPECT_GE(r2.final_height_m, r1.final_height_m * 0.95);
+  // Recorded knobs.
+  EXPECT_DOUBLE_EQ(r2.stiffness_scale, 1e-3);
+  EXPECT_NEAR(r2.kn, 3e4, 1e-6);
+  EXPECT_GT(r2.dt, 0.0);
+  EXPECT_LT(r2.dt, r2.dt_critical);
+  EXPECT_NE(r2.boundaries.find("periodic"), std::string::npos);
+  EXPECT_GT(r2.particles, 100);
+  EXPECT_NEAR(r2.column_height, 0.015, 0.001);
+}
