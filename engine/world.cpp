@@ -170,7 +170,9 @@ void World::update_wall_candidates() {
     wall_point_build_[w] = walls_[w].point;
     for (std::size_t i = 0; i < p_.size(); ++i) {
       const std::size_t slot = w * p_.size() + i;
-      if (walls_[w].distance(p_.x[i]) < p_.r[i] + skin_) {
+      // Fixed grains never move: a wall acting on them does nothing but trip the
+      // overlap check (floor grains beyond an infinite gate plane).
+      if (!p_.fixed[i] && walls_[w].distance(p_.x[i]) < p_.r[i] + skin_) {
         wall_near_[w].push_back(static_cast<int>(i));
       } else if (wall_touch_[slot]) {  // cannot be touching: a stale history would linger
         wall_fs_[slot].setZero();
