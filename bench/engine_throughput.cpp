@@ -26,21 +26,6 @@ using namespace demcal::engine;
 
 namespace {
 
-std::vector<Wall> walls_of(const Vec3& hi) {
-  std::vector<Wall> w;
-  for (int a = 0; a < 3; ++a) {
-    Wall lo, up;
-    lo.name = "lo";
-    lo.point = Vec3::Zero();
-    lo.normal = Vec3::Unit(a);
-    up.name = "hi";
-    up.point = hi;
-    up.normal = -Vec3::Unit(a);
-    w.push_back(lo);
-    w.push_back(up);
-  }
-  return w;
-}
 
 double wall_pressure(const World& w) {
   double s = 0;
@@ -79,7 +64,7 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure) {
   o.dt = 0.15 * std::sqrt(m_min / full.kn);
   o.threads = threads;
   o.local_damping = 0.7;
-  World w(std::move(p), walls_of(Vec3::Constant(edge)), dom, smooth, o);
+  World w(std::move(p), box_walls(Vec3::Zero(), Vec3::Constant(edge)), dom, smooth, o);
   // Growth must stay quasi-static: an impact at the growth speed v = r*rate/dt
   // pushes with v*sqrt(Kn m), which must stay well below the target contact force
   // p d^2. Fast until the pack jams (Z >= 4), then slow and servoed on the stress.
@@ -143,7 +128,7 @@ bool load_pack(const std::string& file, Particles& p, std::vector<Wall>& walls) 
       p.inv_i[k] = 1.0 / (0.4 * rec[4] * rec[3] * rec[3]);
     }
   }
-  walls = walls_of(Vec3::Ones());
+  walls = box_walls(Vec3::Zero(), Vec3::Ones());
   for (auto& w : walls) ok = ok && std::fread(w.point.data(), sizeof(double), 3, f) == 3;
   std::fclose(f);
   return ok;

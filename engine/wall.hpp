@@ -4,6 +4,7 @@
 #include "types.hpp"
 
 #include <string>
+#include <vector>
 
 namespace demcal::engine {
 
@@ -24,5 +25,22 @@ struct Wall {
 
   double distance(const Vec3& x) const { return (x - point).dot(normal); }
 };
+
+// Six smooth walls enclosing the box [lo, hi], in the order x-, x+, y-, y+, z-, z+
+// (index = 2 * axis + side), normals pointing inwards.
+inline std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
+  std::vector<Wall> walls;
+  const char* names[3][2] = {{"x-", "x+"}, {"y-", "y+"}, {"z-", "z+"}};
+  for (int a = 0; a < 3; ++a) {
+    for (int s = 0; s < 2; ++s) {
+      Wall w;
+      w.name = names[a][s];
+      w.point = s == 0 ? lo : hi;
+      w.normal = (s == 0 ? 1.0 : -1.0) * Vec3::Unit(a);
+      walls.push_back(w);
+    }
+  }
+  return walls;
+}
 
 }  // namespace demcal::engine

@@ -12,22 +12,6 @@
 namespace demcal::engine {
 namespace {
 
-std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
-  std::vector<Wall> walls;
-  const char* names[3][2] = {{"x-", "x+"}, {"y-", "y+"}, {"z-", "z+"}};
-  for (int a = 0; a < 3; ++a) {
-    Wall w0, w1;
-    w0.name = names[a][0];
-    w0.point = lo;
-    w0.normal = Vec3::Unit(a);
-    w1.name = names[a][1];
-    w1.point = hi;
-    w1.normal = -Vec3::Unit(a);
-    walls.push_back(w0);
-    walls.push_back(w1);
-  }
-  return walls;
-}
 
 // Slope of y against x by least squares.
 double slope(const std::vector<double>& x, const std::vector<double>& y) {

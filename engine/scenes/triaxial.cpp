@@ -110,23 +110,6 @@ Metrics TriaxialResult::metrics() const {
 
 namespace {
 
-// Walls in this order: x-, x+, y-, y+, z-, z+ (index = 2 * axis + side).
-std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
-  std::vector<Wall> walls;
-  const char* names[3][2] = {{"x-", "x+"}, {"y-", "y+"}, {"z-", "z+"}};
-  for (int a = 0; a < 3; ++a) {
-    for (int s = 0; s < 2; ++s) {
-      Wall w;
-      w.name = names[a][s];
-      w.point = s == 0 ? lo : hi;
-      w.normal = (s == 0 ? 1.0 : -1.0) * Vec3::Unit(a);
-      w.frictional = false;  // smooth, as the seed's
-      w.rolling = false;
-      walls.push_back(w);
-    }
-  }
-  return walls;
-}
 
 class StageFailed : public std::runtime_error {
  public:

@@ -40,13 +40,5 @@ inline Wall plane(const std::string& name, const Vec3& point, const Vec3& normal
   return w;
 }
 
-inline std::vector<Wall> box_walls(const Vec3& lo, const Vec3& hi) {
-  std::vector<Wall> w;
-  for (int a = 0; a < 3; ++a) {
-    w.push_back(plane("lo" + std::to_string(a), lo, Vec3::Unit(a)));
-    w.push_back(plane("hi" + std::to_string(a), hi, -Vec3::Unit(a)));
-  }
-  return w;
-}
 
 }  // namespace demcal::engine::testing
