@@ -4,7 +4,7 @@
 //   bench_triaxial_validation [key=value ...]
 //     particles=2000 packing=dense|loose theta=30 eta=0.1 b=1 p0=100e3 rate=1e-4
 //     strain=0.30 dt_factor=0.3 damping=0.3 ufr=0.01 stol=0.01 phi0=0.30 seed=1
-//     threads=1 budget=400000 alpha=0.5 beta=0.02 csv=triaxial_series.csv quiet=0
+//     twist=0 threads=1 budget=400000 alpha=0.5 beta=0.02 csv=triaxial_series.csv quiet=0
 // Prints the stages, the metrics and the wall time; writes the series as CSV.
 #include "engine/scenes/triaxial.hpp"
 
@@ -63,6 +63,7 @@ int main(int argc, char** argv) {
   c.packing = kv.count("packing") && kv["packing"] == "loose" ? Packing::loose : Packing::dense;
   c.material.friction_angle = deg_to_rad(num("theta", 30.0));
   c.material.rolling_eta = num("eta", 0.1);
+  c.material.rolling_twist = num("twist", 0) != 0;
   c.material.rolling_b = num("b", 1.0);
   c.confining_pressure = num("p0", 100e3);
   c.strain_rate = num("rate", 1e-4);

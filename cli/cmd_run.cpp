@@ -4,8 +4,14 @@
 #include "jobs/job_spec.hpp"
 #include "jobs/query.hpp"
 #include "jobs/runner.hpp"
+#include "jobs/job_error.hpp"
+#include "jobs/shard.hpp"
+#ifdef DEMCAL_HAVE_MPI
+#include "jobs/mpi_runner.hpp"
+#endif
 
 #include <iostream>
+#include <memory>
 #include <unistd.h>
 
 namespace demcal::cli {
@@ -13,12 +19,17 @@ namespace {
 
 struct RunArgs {
   std::string job, db = "demcal.db", out, format = "table";
+  std::string shard;
+  bool shard_given = false;
   int workers = 0;
   bool retry_failed = false;
+  bool mpi = false;
+  double mpi_timeout = 60;
 };
 
 int run(const RunArgs& a) {
   const jobs::Format format = jobs::parse_format(a.format);
+  const jobs::Shard shard = a.shard_given ? jobs::parse_shard(a.shard) : jobs::Shard{};
   // Validate completely before the database is even opened: an invalid job
   // writes nothing anywhere.
   const jobs::Job job = jobs::load_job_file(a.job);
@@ -29,9 +40,15 @@ int run(const RunArgs& a) {
   opt.retry_failed = a.retry_failed;
   opt.terminal = isatty(STDERR_FILENO) != 0;
   opt.log = &std::cerr;
+  opt.shard = shard;
+#ifdef DEMCAL_HAVE_MPI
+  const jobs::RunSummary s =
+      a.mpi ? jobs::mpi::run_job_root(store, job, opt, jobs::mpi::MpiOptions{a.mpi_timeout}) : jobs::run_job(store, job, opt);
+#else
   const jobs::RunSummary s = jobs::run_job(store, job, opt);
+#endif
   jobs::print_rows(std::cout, jobs::select_rows(store, job.name, {}), {}, format);
-  std::cerr << "job " << job.name << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
+  std::cerr << "job " << job.name << (shard.active() ? " shard " + shard.label() : std::string()) << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
             << s.unfinished << " unfinished, of " << s.total << "\n";
   if (s.interrupted || s.failed > 0 || s.unfinished > 0) return kRuntime;
   return kOk;
@@ -48,7 +65,45 @@ void add_run(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "output directory (default: demcal-out/ next to the database)");
   cmd->add_flag("--retry-failed", a->retry_failed, "run the job's failed tasks again");
   cmd->add_option("--format", a->format, "results on stdout: table, csv or json")->capture_default_str();
-  cmd->callback([a, &exit_code] { exit_code = guarded(a->job, [&] { return run(*a); }); });
+  auto* shard_opt = cmd->add_option("--shard", a->shard,
+                  "run only shard i of N (1-based): the tasks whose expansion index k has k mod N = i-1; "
+                  "join the parts' databases with demcal merge");
+  cmd->add_flag("--mpi", a->mpi,
+                "MPI task farm under mpirun: rank 0 owns the database and hands out tasks, the other ranks run them");
+  cmd->add_option("--mpi-timeout", a->mpi_timeout,
+                  "with --mpi: seconds without a heartbeat after which a worker rank counts as lost")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 86400.0));
+  cmd->callback([a, shard_opt, &exit_code] {
+    a->shard_given = shard_opt->count() > 0;
+    if (!a->mpi) {
+      if (a->shard_given) {  // a bad --shard is the command line's fault, not the job file's
+        exit_code = guarded("", [&] { return jobs::parse_shard(a->shard).active() ? kOk : kBadInput; });
+        if (exit_code != kOk) return;
+      }
+      exit_code = guarded(a->job, [&] { return run(*a); });
+      return;
+    }
+#ifdef DEMCAL_HAVE_MPI
+    // Every rank runs this; only rank 0 reads the job file and opens the database.
+    jobs::mpi::Session session;
+    if (session.rank() != 0) {
+      exit_code = jobs::mpi::serve(jobs::mpi::MpiOptions{a->mpi_timeout});
+      return;
+    }
+    if (session.size() < 2) {
+      std::cerr << "demcal: error: --mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks "
+                   "(mpirun -n 3 demcal run JOB --mpi)\n";
+      exit_code = kRuntime;
+      return;
+    }
+    exit_code = guarded(a->job, [&] { return run(*a); });
+#else
+    std::cerr << "demcal: error: --mpi: this demcal was built without MPI (configure with -DDEMCAL_MPI=ON; "
+                 "needs OpenMPI: libopenmpi-dev); use --shard i/N and demcal merge instead\n";
+    exit_code = kBadInput;
+#endif
+  });
 }
 
 }  // namespace demcal::cli

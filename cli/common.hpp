@@ -23,5 +23,11 @@ void add_run(CLI::App& app, int& exit_code);
 void add_status(CLI::App& app, int& exit_code);
 void add_query(CLI::App& app, int& exit_code);
 void add_plot(CLI::App& app, int& exit_code);
+void add_map(CLI::App& app, int& exit_code);
+void add_envelope(CLI::App& app, int& exit_code);
+void add_fit(CLI::App& app, int& exit_code);
+void add_merge(CLI::App& app, int& exit_code);
+void add_slurm(CLI::App& app, int& exit_code);
+void add_study(CLI::App& app, int& exit_code);
 
 }  // namespace demcal::cli

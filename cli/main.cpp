@@ -13,6 +13,12 @@ int main(int argc, char** argv) {
   demcal::cli::add_status(app, exit_code);
   demcal::cli::add_query(app, exit_code);
   demcal::cli::add_plot(app, exit_code);
+  demcal::cli::add_map(app, exit_code);
+  demcal::cli::add_envelope(app, exit_code);
+  demcal::cli::add_fit(app, exit_code);
+  demcal::cli::add_merge(app, exit_code);
+  demcal::cli::add_slurm(app, exit_code);
+  demcal::cli::add_study(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

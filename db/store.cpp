@@ -56,14 +56,18 @@ std::optional<std::int64_t> Store::find_job(const std::string& name) {
   return std::nullopt;
 }
 
-std::int64_t Store::put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks) {
+std::int64_t Store::put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks,
+                            bool partial) {
   Transaction t(conn_);
   const double now = unix_now();
   std::int64_t job_id;
   if (auto id = find_job(name)) {
     job_id = *id;
+    Statement old_spec = conn_.prepare("SELECT spec_json FROM jobs WHERE id = ?");
+    old_spec.bind(1, job_id);
+    const bool same_spec = old_spec.step() && old_spec.text(0) == spec_json;
     conn_.prepare("UPDATE jobs SET spec_json = ?, updated_at = ? WHERE id = ?").bind(1, spec_json).bind(2, now).bind(3, job_id).run();
-    conn_.prepare("DELETE FROM job_tasks WHERE job_id = ?").bind(1, job_id).run();
+    if (!partial || !same_spec) conn_.prepare("DELETE FROM job_tasks WHERE job_id = ?").bind(1, job_id).run();
   } else {
     conn_.prepare("INSERT INTO jobs(name, spec_json, created_at, updated_at) VALUES(?, ?, ?, ?)")
         .bind(1, name).bind(2, spec_json).bind(3, now).bind(4, now).run();
@@ -71,7 +75,7 @@ std::int64_t Store::put_job(const std::string& name, const std::string& spec_jso
   }
   Statement ins = conn_.prepare("INSERT OR IGNORE INTO tasks(job_id, scene, params_json, key) VALUES(?, ?, ?, ?)");
   Statement find = conn_.prepare("SELECT id FROM tasks WHERE key = ?");
-  Statement link = conn_.prepare("INSERT INTO job_tasks(job_id, idx, task_id) VALUES(?, ?, ?)");
+  Statement link = conn_.prepare("INSERT OR REPLACE INTO job_tasks(job_id, idx, task_id) VALUES(?, ?, ?)");
   for (std::size_t i = 0; i < tasks.size(); ++i) {
     ins.reset();
     ins.bind(1, job_id).bind(2, tasks[i].scene).bind(3, tasks[i].params_json).bind(4, tasks[i].key).run();
@@ -81,7 +85,7 @@ std::int64_t Store::put_job(const std::string& name, const std::string& spec_jso
     const std::int64_t task_id = find.int64(0);
     find.reset();
     link.reset();
-    link.bind(1, job_id).bind(2, static_cast<std::int64_t>(i)).bind(3, task_id).run();
+    link.bind(1, job_id).bind(2, tasks[i].idx >= 0 ? tasks[i].idx : static_cast<std::int64_t>(i)).bind(3, task_id).run();
   }
   t.commit();
   return job_id;
@@ -219,6 +223,26 @@ std::vector<std::pair<std::string, std::string>> Store::artifacts(std::int64_t t
   Statement s = conn_.prepare("SELECT kind, path FROM artifacts WHERE task_id = ? ORDER BY rowid");
   s.bind(1, task_id);
   while (s.step()) out.emplace_back(s.text(0), s.text(1));
+  return out;
+}
+
+std::optional<std::string> Store::job_spec(const std::string& name) {
+  Statement s = conn_.prepare("SELECT spec_json FROM jobs WHERE name = ?");
+  s.bind(1, name);
+  if (s.step()) return s.text(0);
+  return std::nullopt;
+}
+
+std::int64_t Store::add_fit(const std::string& targets_json, const std::string& method, const std::string& result_json) {
+  conn_.prepare("INSERT INTO fits(created_at, targets_json, method, result_json) VALUES(?, ?, ?, ?)")
+      .bind(1, unix_now()).bind(2, targets_json).bind(3, method).bind(4, result_json).run();
+  return conn_.last_insert_id();
+}
+
+std::vector<FitRow> Store::fits() {
+  std::vector<FitRow> out;
+  Statement s = conn_.prepare("SELECT id, created_at, targets_json, method, result_json FROM fits ORDER BY id");
+  while (s.step()) out.push_back(FitRow{s.int64(0), s.real(1), s.text(2), s.text(3), s.text(4)});
   return out;
 }
 

@@ -18,6 +18,7 @@ struct NewTask {
   std::string key;
   std::string scene;
   std::string params_json;
+  std::int64_t idx = -1;  // position in the job's expansion; -1: its position in the list
 };
 
 struct TaskRow {
@@ -42,6 +43,12 @@ struct Outcome {
 
 using StatusCounts = std::map<std::string, std::map<std::string, int>>;  // job -> status -> n
 
+struct FitRow {
+  std::int64_t id = 0;
+  double created_at = 0;
+  std::string targets_json, method, result_json;
+};
+
 class Store {
  public:
   // Checks the file read-only first (see check_file), then opens it read-write,
@@ -50,7 +57,10 @@ class Store {
 
   // Records the job (by name; a changed spec replaces the old one) and links it to
   // its tasks, creating those whose key is new. Returns the job id.
-  std::int64_t put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks);
+  // partial (a shard, `demcal run --shard`): `tasks` is part of the job, linked at
+  // their idx; links already there are kept unless the spec changed.
+  std::int64_t put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks,
+                       bool partial = false);
   std::optional<std::int64_t> find_job(const std::string& name);
 
   // Tasks of a job in expansion order, or every task when job is empty.
@@ -72,6 +82,12 @@ class Store {
   StatusCounts counts(const std::string& job = "");
   std::vector<std::pair<std::string, double>> metrics(std::int64_t task_id);
   std::vector<std::pair<std::string, std::string>> artifacts(std::int64_t task_id);
+
+  // The spec_json recorded for a job, if the job exists.
+  std::optional<std::string> job_spec(const std::string& name);
+  // Calibration results (the fits table): append one, list all (oldest first).
+  std::int64_t add_fit(const std::string& targets_json, const std::string& method, const std::string& result_json);
+  std::vector<FitRow> fits();
 
   const std::string& path() const { return path_; }
 

@@ -84,8 +84,19 @@ DEMCAL_HOT ContactResponse apply_contact_law(const ContactParams& p, double dt, 
   }
 
   if (rolling && frictional && p.rolling()) {
-    carry_into_tangent_plane(mr, k.n, twist);
-    const Vec3 w_roll = k.w_rel - k.w_rel.dot(k.n) * k.n;
+    Vec3 w_roll;
+    if (p.twist) {
+      // Keep the twisting part of the moment along the current normal; carry the
+      // rolling part like the tangential force.
+      const double m_twist = mr.dot(k.n);
+      mr -= m_twist * k.n;
+      carry_into_tangent_plane(mr, k.n, twist);
+      mr += m_twist * k.n;
+      w_roll = k.w_rel;
+    } else {
+      carry_into_tangent_plane(mr, k.n, twist);
+      w_roll = k.w_rel - k.w_rel.dot(k.n) * k.n;
+    }
     const double kr = p.b * p.ks * k.r_roll * k.r_roll;
     mr -= (kr * dt) * w_roll;
     const double cap = p.eta * k.r_roll * out.fn;

@@ -68,7 +68,7 @@ class Runner {
  public:
   Runner(db::Store& store, const Job& job, const RunOptions& opt)
       : store_(store), job_(job), opt_(opt), token_(runner_token()),
-        progress_(*opt.log, opt.terminal), dir_(std::filesystem::absolute(opt.out_dir) / job.name) {}
+        progress_(*opt.log, opt.terminal), dir_(task_output_dir(job, opt)) {}
 
   RunSummary run();
 
@@ -97,9 +97,11 @@ class Runner {
 };
 
 void Runner::prepare() {
-  std::vector<db::NewTask> tasks;
-  for (const auto& t : job_.tasks) tasks.push_back({t.key, job_.scene, t.params.dump()});
-  const std::int64_t job_id = store_.put_job(job_.name, job_.spec.dump(), tasks);
+  const std::int64_t job_id =
+      store_.put_job(job_.name, job_.spec.dump(), tasks_to_record(job_, opt_.shard), opt_.shard.active());
+  if (opt_.shard.active())
+    *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
+              << " = " << opt_.shard.index - 1 << "\n";
   if (int n = store_.requeue_dead(runner_alive))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (opt_.retry_failed)
@@ -119,17 +121,10 @@ void Runner::prepare() {
 void Runner::refill_queue() {
   queue_.clear();
   for (auto& row : store_.tasks(job_.name))
-    if (row.status == "pending") queue_.push_back(std::move(row));
+    if (row.status == "pending" && opt_.shard.contains(static_cast<std::size_t>(row.index))) queue_.push_back(std::move(row));
 }
 
-std::string Runner::describe_task(std::size_t index) const {
-  std::string s = "task #" + std::to_string(index);
-  if (index >= job_.tasks.size()) return s;
-  std::string axes;
-  for (const auto& a : job_.axes) axes += (axes.empty() ? "" : " ") + a + "=" + job_.tasks[index].params.at(a).dump();
-  if (job_.replicas > 1) axes += (axes.empty() ? "" : " ") + std::string("seed=") + job_.tasks[index].params.at("seed").dump();
-  return axes.empty() ? s : s + " (" + axes + ")";
-}
+std::string Runner::describe_task(std::size_t index) const { return jobs::describe_task(job_, index); }
 
 void Runner::launch(const db::TaskRow& row) {
   WorkerTask t;
@@ -281,6 +276,32 @@ RunSummary Runner::run() {
 }
 
 }  // namespace
+
+std::vector<db::NewTask> tasks_to_record(const Job& job, const Shard& shard) {
+  std::vector<db::NewTask> tasks;
+  for (const auto& t : job.tasks)
+    if (shard.contains(t.index))
+      tasks.push_back({t.key, job.scene, t.params.dump(), static_cast<std::int64_t>(t.index)});
+  return tasks;
+}
+
+std::string task_output_dir(const Job& job, const RunOptions& options) {
+  // Shards write next to each other (often one out dir for all parts) and their
+  // task ids overlap, so each shard gets its own folder.
+  std::filesystem::path dir = std::filesystem::absolute(options.out_dir) / job.name;
+  if (options.shard.active())
+    dir /= "shard-" + std::to_string(options.shard.index) + "-of-" + std::to_string(options.shard.count);
+  return dir.string();
+}
+
+std::string describe_task(const Job& job, std::size_t index) {
+  std::string s = "task #" + std::to_string(index);
+  if (index >= job.tasks.size()) return s;
+  std::string axes;
+  for (const auto& a : job.axes) axes += (axes.empty() ? "" : " ") + a + "=" + job.tasks[index].params.at(a).dump();
+  if (job.replicas > 1) axes += (axes.empty() ? "" : " ") + std::string("seed=") + job.tasks[index].params.at("seed").dump();
+  return axes.empty() ? s : s + " (" + axes + ")";
+}
 
 RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options) {
   RunOptions opt = options;

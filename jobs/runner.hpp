@@ -3,6 +3,7 @@
 // or abort fails that task only. Only this (parent) process writes the store.
 #include "db/store.hpp"
 #include "job_spec.hpp"
+#include "shard.hpp"
 
 #include <ostream>
 #include <string>
@@ -15,6 +16,7 @@ struct RunOptions {
   bool retry_failed = false; // put the job's failed tasks back in the queue first
   bool terminal = false;     // draw a progress bar
   std::ostream* log = nullptr;  // progress and state changes (stderr)
+  Shard shard;               // run only this shard's tasks (see shard.hpp)
 };
 
 struct RunSummary {
@@ -28,5 +30,13 @@ struct RunSummary {
 // every task of the job is done or failed, or SIGINT/SIGTERM arrives: then the
 // running tasks are stopped and put back to pending, finished ones are kept.
 RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
+
+// What the local and the MPI runner share.
+// The job's tasks to record, restricted to options.shard (with their expansion index).
+std::vector<db::NewTask> tasks_to_record(const Job& job, const Shard& shard);
+// Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
+std::string task_output_dir(const Job& job, const RunOptions& options);
+// "task #3 (dt_factor=0.1)" for progress lines.
+std::string describe_task(const Job& job, std::size_t index);
 
 }  // namespace demcal::jobs

@@ -49,6 +49,14 @@ void run_gnuplot(const std::string& script) {
 
 }  // namespace
 
+void run_gnuplot_script(const std::string& script_path) { run_gnuplot(script_path); }
+std::string gnuplot_quoted(const std::string& text) { return quoted(text); }
+std::string gnuplot_png_terminal(int width, int height) {
+  const std::string size = std::to_string(width) + "," + std::to_string(height);
+  return "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) { set terminal pngcairo size " + size +
+         " } else { set terminal png size " + size + " }\n";
+}
+
 void plot_series(const PlotRequest& r) {
   const std::string ext = extension_of(r.out);
   if (ext != ".png" && ext != ".svg") throw JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");

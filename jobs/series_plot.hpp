@@ -18,4 +18,11 @@ struct PlotRequest {
 // std::runtime_error when gnuplot cannot be run or fails.
 void plot_series(const PlotRequest& request);
 
+// Runs gnuplot on a script file (no shell). Throws std::runtime_error when gnuplot
+// is missing or fails. `quoted` writes a gnuplot single-quoted string.
+void run_gnuplot_script(const std::string& script_path);
+std::string gnuplot_quoted(const std::string& text);
+// The PNG terminal line series plots use (pngcairo when available), at width x height.
+std::string gnuplot_png_terminal(int width, int height);
+
 }  // namespace demcal::jobs

@@ -9,6 +9,15 @@
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <cerrno>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
 
 namespace demcal::jobs {
 namespace {
@@ -79,10 +88,14 @@ int run_worker(const WorkerTask& t) {
 std::optional<db::Outcome> read_worker_result(const std::string& path) {
   std::ifstream f(path);
   if (!f) return std::nullopt;
+  std::stringstream text;
+  text << f.rdbuf();
+  return parse_worker_result(text.str());
+}
+
+std::optional<db::Outcome> parse_worker_result(const std::string& text) {
   try {
-    std::stringstream text;
-    text << f.rdbuf();
-    const nlohmann::json j = nlohmann::json::parse(text.str());
+    const nlohmann::json j = nlohmann::json::parse(text);
     db::Outcome o;
     o.status = j.at("status").get<std::string>();
     o.error = j.value("error", "");
@@ -93,6 +106,59 @@ std::optional<db::Outcome> read_worker_result(const std::string& path) {
   } catch (const std::exception&) {
     return std::nullopt;
   }
+}
+
+std::string run_forked(const WorkerTask& t, double tick_s, const std::function<void()>& tick) {
+  std::filesystem::remove(t.result_path);
+  std::cout.flush();
+  std::cerr.flush();
+  std::fflush(nullptr);
+  const auto t0 = std::chrono::steady_clock::now();
+  const pid_t parent = getpid();
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("fork failed");
+  if (pid == 0) {
+    // As in the local runner: the child dies with its parent, never touches
+    // anything it inherited (here: MPI) and leaves with _exit().
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(4);
+    signal(SIGINT, SIG_IGN);
+    signal(SIGTERM, SIG_DFL);
+    _exit(run_worker(t));
+  }
+  int st = 0;
+  auto last_tick = t0;
+  for (;;) {
+    const pid_t w = waitpid(pid, &st, WNOHANG);
+    if (w == pid) break;
+    if (w < 0 && errno != EINTR) throw std::runtime_error("waitpid failed");
+    const auto now = std::chrono::steady_clock::now();
+    if (std::chrono::duration<double>(now - last_tick).count() >= tick_s) {
+      last_tick = now;
+      if (tick) tick();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::string text;
+  if (WIFEXITED(st) && WEXITSTATUS(st) == 0) {
+    std::ifstream f(t.result_path);
+    std::stringstream buf;
+    buf << f.rdbuf();
+    text = buf.str();
+  }
+  std::filesystem::remove(t.result_path);
+  if (!text.empty() && parse_worker_result(text)) return text;
+  std::string error;
+  if (WIFSIGNALED(st)) {
+    const char* abbrev = sigabbrev_np(WTERMSIG(st));
+    error = "worker killed by " + (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(WTERMSIG(st)));
+  } else {
+    error = "worker exited with status " + std::to_string(WEXITSTATUS(st)) + " without a result";
+  }
+  const nlohmann::json out = {{"status", "failed"}, {"error", error}, {"wall_s", wall},
+                              {"metrics", nlohmann::json::array()}, {"artifacts", nlohmann::json::array()}};
+  return out.dump();
 }
 
 }  // namespace demcal::jobs

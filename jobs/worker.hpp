@@ -5,6 +5,7 @@
 #include "db/store.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -32,5 +33,14 @@ int run_worker(const WorkerTask& task);
 
 // The result a worker left, or nullopt when there is none or it is unreadable.
 std::optional<db::Outcome> read_worker_result(const std::string& path);
+// The same from the result's JSON text (as the MPI task farm sends it).
+std::optional<db::Outcome> parse_worker_result(const std::string& text);
+
+// Runs the task in a forked child, as the local runner does (a crash fails the
+// task only), waiting for it while calling `tick` about every tick_s seconds (the
+// MPI heartbeat). Returns the result's JSON text; when the child left none, a
+// failed result naming the signal or exit status. task.result_path is used and
+// removed.
+std::string run_forked(const WorkerTask& task, double tick_s, const std::function<void()>& tick);
 
 }  // namespace demcal::jobs

@@ -41,6 +41,7 @@ void CollisionConfig::validate() const {
   if (dt == 0.0 && (!std::isfinite(dt_factor) || dt_factor <= 0.0))
     throw ConfigError("numerics.dt_factor", "must be a finite number > 0");
   if (steps < 1) throw ConfigError("collision.steps", "must be at least 1");
+  if (!std::isfinite(duration) || duration < 0.0) throw ConfigError("collision.duration", "must be finite and >= 0");
   if (sample_every < 1) throw ConfigError("collision.sample_every", "must be at least 1");
   if (threads < 1) throw ConfigError("threads", "must be at least 1");
 }
@@ -55,7 +56,10 @@ Metrics CollisionResult::metrics() const {
           {"drift_per_million_steps", drift_per_million_steps},
           {"max_relative_error", max_relative_error},
           {"wall_s", wall_seconds},
-          {"particle_steps_per_s", particle_steps_per_second}};
+          {"particle_steps_per_s", particle_steps_per_second},
+          {"simulated_s", simulated_seconds},
+          {"drift_per_simulated_s", drift_per_simulated_second},
+          {"wall_s_per_simulated_s", simulated_seconds > 0 ? wall_seconds / simulated_seconds : 0.0}};
 }
 
 CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
@@ -84,6 +88,11 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   for (double m : p.m) m_min = std::min(m_min, m);
   WorldOptions opt;
   opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, mat.kn);
+  long total_steps = cfg.steps, sample_every = cfg.sample_every;
+  if (cfg.duration > 0.0) {
+    total_steps = std::max(1L, static_cast<long>(std::ceil(cfg.duration / opt.dt - 1e-9)));
+    sample_every = std::max(1L, (total_steps + 199) / 200);  // at most 200 samples after the first
+  }
   opt.threads = cfg.threads;
   opt.allow_unstable_dt = cfg.allow_unstable_dt;
   opt.max_overlap_fraction = cfg.max_overlap_fraction;
@@ -117,11 +126,11 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   try {
     world.refresh();
     sample();
-    while (world.step_count() < cfg.steps) {
-      const long chunk = std::min(cfg.sample_every, cfg.steps - world.step_count());
+    while (world.step_count() < total_steps) {
+      const long chunk = std::min(sample_every, total_steps - world.step_count());
       world.run(chunk);
       sample();
-      if (obs) obs->on_progress(static_cast<double>(world.step_count()) / static_cast<double>(cfg.steps));
+      if (obs) obs->on_progress(static_cast<double>(world.step_count()) / static_cast<double>(total_steps));
     }
   } catch (const InstabilityError& e) {
     res.outcome.status = SceneStatus::unstable;
@@ -132,8 +141,10 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   res.steps_done = world.step_count();
   res.wall_seconds = secs;
   res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
+  res.simulated_seconds = static_cast<double>(res.steps_done) * opt.dt;
   res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;
-  if (!res.outcome.ok()) res.drift_per_million_steps = INFINITY;
+  res.drift_per_simulated_second = res.drift_per_million_steps / (1e6 * opt.dt);
+  if (!res.outcome.ok()) res.drift_per_million_steps = res.drift_per_simulated_second = INFINITY;
   return res;
 }
 

@@ -22,6 +22,8 @@ struct CollisionConfig {
   double dt_factor = 0.2;
   long steps = 200000;
   long sample_every = 1000;
+  double duration = 0.0;          // > 0: simulated time [s] instead of steps (steps = ceil(duration/dt),
+                                  // 200 samples): runs at different dt then cover the same collisions
   bool keep_friction = false;     // stability studies: run with the material's theta, eta
   bool allow_unstable_dt = false; // stability studies: run past the critical step
   double max_overlap_fraction = 0.25;
@@ -43,6 +45,8 @@ struct CollisionResult {
   double max_relative_error = 0;       // max |E - E0| / E0 over the samples
   double wall_seconds = 0;
   double particle_steps_per_second = 0;
+  double simulated_seconds = 0;        // steps_done * dt
+  double drift_per_simulated_second = 0;  // relative, from the same line: drift_per_million_steps / (1e6 dt)
   Series energy;  // step, time, kinetic, elastic, total
 
   Metrics metrics() const;

@@ -22,6 +22,8 @@ std::vector<ParamSpec> collision_params() {
   // steps, sample_every, dt and dt_factor have no fixed default: resolve() picks them.
   p.push_back(int_param(kSection, "steps", "steps", nullptr).at_least(1).at_most(1e12));
   p.push_back(int_param(kSection, "sample_every", "sample_every", nullptr).at_least(1).at_most(1e12));
+  // Simulated time instead of steps: tasks over a dt grid then cover the same physics.
+  p.push_back(real_param(kSection, "duration", "duration", nullptr).above(0).at_most(1e3));
   p.push_back(real_param(kSection, "dt", "dt", nullptr).above(0).below(1));
   p.push_back(real_param(kSection, "dt_factor", "dt_factor", nullptr).above(0).at_most(10));
   p.push_back(bool_param(kSection, "keep_friction", "keep_friction", d.keep_friction));
@@ -35,8 +37,9 @@ engine::CollisionConfig config_from(const nlohmann::json& p) {
   c.particles = p.at("particles").get<std::size_t>();
   c.solid_fraction = p.at("solid_fraction").get<double>();
   c.velocity_max = p.at("velocity_max").get<double>();
-  c.steps = p.at("steps").get<long>();
-  c.sample_every = p.at("sample_every").get<long>();
+  c.steps = p.value("steps", std::int64_t(1));
+  c.sample_every = p.value("sample_every", std::int64_t(1));
+  c.duration = p.value("duration", 0.0);
   c.dt = p.value("dt", 0.0);
   if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
   c.keep_friction = p.at("keep_friction").get<bool>();
@@ -57,11 +60,17 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   if (p.contains("dt") && p.contains("dt_factor"))
     throw JobError("collision.dt", "give dt or dt_factor, not both");
   if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", 0.2));
-  if (!p.contains("steps")) p["steps"] = default_steps(fidelity);
-  const auto steps = p["steps"].get<std::int64_t>();
-  if (!p.contains("sample_every")) p["sample_every"] = std::max<std::int64_t>(1, steps / 200);
-  if (p["sample_every"].get<std::int64_t>() > steps)
-    throw JobError("collision.sample_every", "must not exceed collision.steps (" + std::to_string(steps) + ")");
+  if (p.contains("duration")) {
+    // The engine derives steps and sampling from the duration and dt.
+    for (const char* k : {"steps", "sample_every"})
+      if (p.contains(k)) throw JobError(std::string("collision.") + k, "give collision.duration or collision.steps, not both");
+  } else {
+    if (!p.contains("steps")) p["steps"] = default_steps(fidelity);
+    const auto steps = p["steps"].get<std::int64_t>();
+    if (!p.contains("sample_every")) p["sample_every"] = std::max<std::int64_t>(1, steps / 200);
+    if (p["sample_every"].get<std::int64_t>() > steps)
+      throw JobError("collision.sample_every", "must not exceed collision.steps (" + std::to_string(steps) + ")");
+  }
   if (p["d_min"].get<double>() > p["d_max"].get<double>())
     throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
   try {

@@ -30,9 +30,11 @@ TEST(Cli, ValidateRejectsBadJobsNamingTheField) {
   Result r = run_demcal({"validate", "bad.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("collision.partcles"), std::string::npos) << r.err;
-  r = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/table-2-2.json"}, d.path.string());
-  EXPECT_EQ(r.rc, 2);  // the triaxial scene is not registered yet
+  write(d.file("unknown.json"), R"({"name": "u", "scene": "triaxal"})");
+  r = run_demcal({"validate", "unknown.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("scene"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("triaxal"), std::string::npos) << r.err;
   r = run_demcal({"validate", "missing.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("missing.json"), std::string::npos) << r.err;

@@ -236,3 +236,33 @@ TEST(ContactLaw, CoulombCapAndPlasticMomentCap) {
   EXPECT_NEAR(mr.norm(), 0.1 * k.r_roll * fn, 1e-15);
   EXPECT_LT(mr.y(), 0.0);  // opposes the relative rolling
 }
+
+// Relative spin about the normal: free by default (the rolling spring acts in the
+// tangent plane only); resisted, up to the same plastic cap, when `twist` is set.
+TEST(ContactLaw, TwistIsFreeUnlessTheRollingSpringResistsIt) {
+  ContactKinematics k;
+  k.n = Vec3::UnitZ();
+  k.delta = 1e-6;
+  k.v_rel = Vec3::Zero();
+  k.w_rel = Vec3(0, 0, 10.0);  // pure relative twist
+  k.spin_n = 0;
+  k.r_roll = 1e-3;
+  for (const bool twist : {false, true}) {
+    ContactParams cp = law(3e7, 2.7e7, 30.0, 1.0, 0.1);
+    cp.twist = twist;
+    Vec3 fs = Vec3::Zero(), mr = Vec3::Zero();
+    ContactResponse c{};
+    for (int s = 0; s < 10; ++s) c = apply_contact_law(cp, 1e-7, k, fs, mr, true, true);
+    if (!twist) {
+      EXPECT_EQ(mr.norm(), 0.0);
+      continue;
+    }
+    // Elastic: 10 steps of Kr * w * dt, along -n, below the cap.
+    const double kr = cp.b * cp.ks * k.r_roll * k.r_roll;
+    EXPECT_FALSE(c.rolling_slip);
+    EXPECT_NEAR(mr.z(), -10 * kr * 10.0 * 1e-7, 1e-15);
+    for (int s = 0; s < 100000; ++s) c = apply_contact_law(cp, 1e-7, k, fs, mr, true, true);
+    EXPECT_TRUE(c.rolling_slip);
+    EXPECT_NEAR(mr.norm(), 0.1 * k.r_roll * cp.kn * k.delta, 1e-15);
+  }
+}

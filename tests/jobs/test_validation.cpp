@@ -52,7 +52,7 @@ const std::vector<Bad>& cases() {
       {"missing_name", [](json& j) { j.erase("name"); }, "name"},
       {"missing_scene", [](json& j) { j.erase("scene"); }, "scene"},
       {"unknown_scene", [](json& j) { j["scene"] = "sandpile"; }, "scene"},
-      {"triaxial_not_registered", [](json& j) { j["scene"] = "triaxial"; }, "scene"},
+      {"section_of_another_scene", [](json& j) { j["scene"] = "triaxial"; }, "scene"},
       {"scene_not_string", [](json& j) { j["scene"] = 3; }, "scene"},
       {"name_not_string", [](json& j) { j["name"] = 3; }, "name"},
       {"name_with_slash", [](json& j) { j["name"] = "../evil"; }, "name"},

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# demcal against LAMMPS on the same dense pack, one core, same number of steps.
+#
+#   bash bench/peers/run_lammps_compare.sh [BUILD_DIR] [N] [STEPS]
+#
+# Needs the Debian package lammps (lmp with the GRANULAR package: pair_style
+# granular, hooke / tangential linear_history / rolling sds). The pack is the one
+# bench_engine_throughput prepares (N grains, diameters uniform in [1, 2] mm,
+# ~100 kPa, theta 30 deg, eta 0.1), cached in $BENCH_PACK_DIR (default: a
+# temporary folder). Both codes start from the same positions at rest, run 200
+# untimed steps (contact springs build up), then STEPS timed steps. Prints ns per
+# particle-step for each and the ratio. Parameter mapping: docs/performance.md.
+set -euo pipefail
+here=$(cd "$(dirname "$0")/../.." && pwd)
+build=${1:-$here/build}
+n=${2:-2000}
+steps=${3:-2000}
+command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps" >&2; exit 2; }
+for b in bench_engine_throughput bench_lammps_compare; do
+  [ -x "$build/bench/$b" ] || { echo "$build/bench/$b missing: build first (cmake --build $build)" >&2; exit 2; }
+done
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+export BENCH_PACK_DIR=${BENCH_PACK_DIR:-$work}
+export OMP_NUM_THREADS=1
+pack=$BENCH_PACK_DIR/demcal-pack-$n.bin
+if [ ! -f "$pack" ]; then
+  echo "preparing the $n-grain pack (cached in $BENCH_PACK_DIR) ..." >&2
+  "$build/bench/bench_engine_throughput" "$n" --steps 10 --threads 1 >/dev/null
+fi
+demcal_line=$("$build/bench/bench_lammps_compare" "$pack" --steps "$steps" --lammps-dir "$work")
+echo "$demcal_line"
+(cd "$work" && lmp -in in.compare -log log.lammps -screen none) || { echo "lmp failed; see its log:" >&2; tail -20 "$work/log.lammps" >&2; exit 1; }
+# The second "Loop time" is the timed run.
+loop=$(grep '^Loop time' "$work/log.lammps" | tail -1)
+lsec=$(echo "$loop" | awk '{print $4}')
+lammps_ns=$(awk -v s="$lsec" -v n="$n" -v k="$steps" 'BEGIN{printf "%.2f", s*1e9/(n*k)}')
+echo "lammps: $loop -> $lammps_ns ns/particle-step"
+grep -A3 '^Neighbor list info' "$work/log.lammps" | head -0 || true
+demcal_ns=$(echo "$demcal_line" | sed -E 's/.* ([0-9.]+) ns\/particle-step.*/\1/')
+awk -v a="$lammps_ns" -v b="$demcal_ns" 'BEGIN{printf "ratio LAMMPS / demcal: %.2f (demcal is %.2fx %s per particle-step)\n", a/b, (a>b?a/b:b/a), (a>b?"faster":"slower")}'

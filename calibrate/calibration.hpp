@@ -1,0 +1,76 @@
+#pragma once
+// The calibration as the CLI runs it: pick the job holding each target's metric,
+// build its response surface and surrogate, invert, store the result in `fits`;
+// optionally refine by running the DEM around the candidate and fitting again.
+#include "inversion.hpp"
+
+#include "db/store.hpp"
+#include "jobs/query.hpp"
+
+#include <functional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace demcal::calibrate {
+
+struct FitRequest {
+  std::vector<Target> targets;
+  std::vector<std::string> jobs;       // empty: every job in the store
+  std::vector<jobs::Where> where;      // pins parameters other than theta, eta
+  FitOptions options;
+};
+
+struct Calibration {
+  std::vector<ResponseSurface> surfaces;  // one per target
+  std::vector<Model> models;              // one per target
+  FitResult result;
+};
+
+// The job holding `metric` among `jobs` (every base job when empty). Throws
+// JobError naming --target (no job has it) or --job (several have it).
+std::string job_for_metric(db::Store& store, const std::string& metric, const std::vector<std::string>& jobs,
+                           const std::vector<jobs::Where>& where);
+
+// Throws JobError for bad input (unknown metric, no data, grids that do not overlap).
+Calibration calibrate(db::Store& store, const FitRequest& request);
+
+// Stores the fit (round 0: the plain fit) and returns its id.
+std::int64_t store_fit(db::Store& store, const FitRequest& request, const Calibration& cal, int round,
+                       const nlohmann::json& extra = nlohmann::json::object());
+
+// Refinement: DEM runs at the candidate and a few neighbours, appended as the
+// job's sub-job <job>.refine<round>; `run_points` does the running.
+struct RefinePoint {
+  double theta, eta;
+};
+using PointRunner = std::function<void(db::Store& store, const std::string& job, int round, const std::vector<RefinePoint>& points)>;
+
+struct RefineOptions {
+  int rounds = 0;
+  double tolerance = 0.02;  // stop when the candidate moves less than this fraction of the grid range on both axes
+  PointRunner run_points;
+  std::ostream* log = nullptr;
+};
+
+struct RefineRound {
+  int round = 0;
+  std::vector<RefinePoint> points;
+  double theta = kNaN, eta = kNaN, move = kNaN;  // candidate after the round; move in fractions of the range
+  bool ok = false;
+  std::int64_t fit_id = 0;
+};
+
+// The candidate and three neighbours forming a rectangle with it, spaced by the
+// grid spacing / 2^round towards the inside of the box.
+std::vector<RefinePoint> refine_points(const ResponseSurface& rs, double theta, double eta, int round);
+
+// Runs rounds until the candidate moves less than the tolerance, a fit fails, or
+// `rounds` is reached; `cal` holds the last calibration. Each round's fit is stored.
+std::vector<RefineRound> refine(db::Store& store, const FitRequest& request, Calibration& cal, const RefineOptions& options);
+
+// The real runner: a sub-job of `job` whose grid is the points' theta x eta values
+// (other axes as in the job), run by jobs::run_job into the store.
+PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log);
+
+}  // namespace demcal::calibrate

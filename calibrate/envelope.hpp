@@ -1,0 +1,36 @@
+#pragma once
+// Mohr-Coulomb envelopes from triaxial peaks at several confining pressures:
+// sigma1 = N sigma3 + 2 c sqrt(N), N = tan^2(45 deg + phi/2), by least squares,
+// with standard errors; and the zero-cohesion line sigma1 = N0 sigma3.
+#include "db/store.hpp"
+#include "jobs/query.hpp"
+
+#include <string>
+#include <vector>
+
+namespace demcal::calibrate {
+
+struct Envelope {
+  int n = 0;                      // (sigma3, sigma1) pairs
+  int pressures = 0;              // distinct sigma3
+  double phi_deg = 0, phi_se = 0; // with cohesion (se NaN with fewer than 3 pairs)
+  double c = 0, c_se = 0;         // cohesion, in the units of sigma
+  double phi0_deg = 0, phi0_se = 0;  // zero cohesion
+};
+
+// Throws std::invalid_argument with fewer than 2 distinct sigma3 values.
+Envelope fit_envelope(const std::vector<double>& sigma3, const std::vector<double>& sigma1);
+
+struct PointEnvelope {
+  double theta = 0, eta = 0;
+  std::vector<double> sigma3_kpa, sigma1_kpa;
+  Envelope env;
+  std::string note;  // why no envelope (one pressure only, ...)
+};
+
+// Per (theta, eta) of the job: sigma3 = confining_kpa, sigma1 = sigma3 + q_peak_pa / 1000
+// (kPa) from every finished task. Throws JobError for bad input (no job, no data,
+// other parameters varying).
+std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where);
+
+}  // namespace demcal::calibrate

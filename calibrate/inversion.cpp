@@ -1,0 +1,354 @@
+#include "inversion.hpp"
+
+#include "jobs/job_error.hpp"
+
+#include <nlopt.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <regex>
+#include <stdexcept>
+
+namespace demcal::calibrate {
+namespace {
+
+using jobs::JobError;
+
+std::string g(double v, int digits = 4) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.*g", digits, v);
+  return b;
+}
+
+bool parse_number(const std::string& s, double& out) {
+  if (s.empty()) return false;
+  char* end = nullptr;
+  out = std::strtod(s.c_str(), &end);
+  return end && *end == '\0' && std::isfinite(out);
+}
+
+std::pair<std::string, std::string> split_pair(const std::string& text, const std::string& field, const char* what) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
+    throw JobError(field, std::string("expected METRIC=") + what + " (e.g. phi_peak=41.4), got \"" + text + "\"");
+  const std::string name = text.substr(0, eq);
+  static const std::regex ok("[A-Za-z_][A-Za-z0-9_.]*");
+  if (!std::regex_match(name, ok)) throw JobError(field, "\"" + name + "\" is not a metric name (in \"" + text + "\")");
+  return {name, text.substr(eq + 1)};
+}
+
+// Chi-square upper quantile (Wilson-Hilferty), for the consistency warning.
+double chi2_quantile(int dof, double z) {
+  const double k = dof, a = 2.0 / (9.0 * k);
+  return k * std::pow(1 - a + z * std::sqrt(a), 3);
+}
+
+struct Objective {
+  const std::vector<Model>* models;
+  const std::vector<double>* values;
+  const std::vector<double>* sigmas;
+  const Box* box;
+  double operator()(double th, double et) const {
+    double m = 0;
+    for (std::size_t k = 0; k < models->size(); ++k) {
+      const double r = ((*models)[k].surrogate(th, et) - (*values)[k]) / (*sigmas)[k];
+      m += r * r;
+    }
+    return m;
+  }
+  double unit(const std::vector<double>& x) const {
+    return (*this)(box->theta_lo + x[0] * (box->theta_hi - box->theta_lo), box->eta_lo + x[1] * (box->eta_hi - box->eta_lo));
+  }
+};
+
+double nlopt_objective(unsigned n, const double* x, double* grad, void* data) {
+  (void)grad;
+  const auto* o = static_cast<const Objective*>(data);
+  return o->unit(std::vector<double>(x, x + n));
+}
+
+// Where a point sits relative to the box, in words.
+std::string where(const Box& b, double th, double et) {
+  const double tt = 1e-6 * (b.theta_hi - b.theta_lo), te = 1e-6 * (b.eta_hi - b.eta_lo);
+  std::string s = "theta = " + g(th) + " deg";
+  if (std::abs(th - b.theta_lo) <= tt) s += " (the theta lower bound)";
+  if (std::abs(th - b.theta_hi) <= tt) s += " (the theta upper bound)";
+  s += ", eta = " + g(et);
+  if (std::abs(et - b.eta_lo) <= te) s += " (the eta lower bound)";
+  if (std::abs(et - b.eta_hi) <= te) s += " (the eta upper bound)";
+  return s;
+}
+
+}  // namespace
+
+Target parse_target(const std::string& text, const std::string& field) {
+  const auto [name, value] = split_pair(text, field, "VALUE");
+  Target t;
+  t.metric = name;
+  if (!parse_number(value, t.value)) throw JobError(field, "value of " + name + " is not a finite number: \"" + value + "\"");
+  return t;
+}
+
+void apply_sigma(std::vector<Target>& targets, const std::string& text) {
+  const auto [name, value] = split_pair(text, "--sigma", "SIGMA");
+  double s = 0;
+  if (!parse_number(value, s) || !(s > 0))
+    throw JobError("--sigma", "sigma of " + name + " must be a positive number, got \"" + value + "\"");
+  bool found = false;
+  for (auto& t : targets)
+    if (t.metric == name) {
+      t.sigma = s;
+      found = true;
+    }
+  if (!found) throw JobError("--sigma", "no --target for metric \"" + name + "\"");
+}
+
+bool Region::contains(const Box& box, double theta, double eta) const {
+  if (n < 2 || mask.empty()) return false;
+  const double fi = (theta - box.theta_lo) / (box.theta_hi - box.theta_lo) * (n - 1);
+  const double fj = (eta - box.eta_lo) / (box.eta_hi - box.eta_lo) * (n - 1);
+  const long i = std::lround(fi), j = std::lround(fj);
+  if (i < 0 || j < 0 || i >= n || j >= n) return false;
+  return mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] == '1';
+}
+
+FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
+                 const FitOptions& opt) {
+  if (models.size() != targets.size() || targets.empty())
+    throw std::invalid_argument("invert: one model per target, at least one target");
+  if (!(box.theta_hi > box.theta_lo) || !(box.eta_hi > box.eta_lo)) throw std::invalid_argument("invert: empty box");
+  FitResult res;
+  res.box = box;
+  res.method = "surrogate + NLopt GN_DIRECT_L then LN_BOBYQA";
+  const int n = std::max(11, opt.region_n);
+  auto theta_at = [&](int i) { return box.theta_lo + (box.theta_hi - box.theta_lo) * i / (n - 1); };
+  auto eta_at = [&](int j) { return box.eta_lo + (box.eta_hi - box.eta_lo) * j / (n - 1); };
+
+  // Each surrogate on the fine grid: its range over the box, and where it is reached.
+  const std::size_t K = targets.size();
+  std::vector<std::vector<double>> val(K, std::vector<double>(static_cast<std::size_t>(n * n)));
+  std::vector<double> values(K), sigmas(K);
+  for (std::size_t k = 0; k < K; ++k) {
+    TargetFit t;
+    t.metric = targets[k].metric;
+    t.job = models[k].job;
+    t.target = targets[k].value;
+    t.loo_rms = models[k].surrogate.loo_rms();
+    t.replica_se = models[k].replica_se;
+    t.lo = INFINITY;
+    t.hi = -INFINITY;
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const double v = models[k].surrogate(theta_at(i), eta_at(j));
+        val[k][static_cast<std::size_t>(j * n + i)] = v;
+        if (v < t.lo) t.lo = v, t.theta_at_lo = theta_at(i), t.eta_at_lo = eta_at(j);
+        if (v > t.hi) t.hi = v, t.theta_at_hi = theta_at(i), t.eta_at_hi = eta_at(j);
+      }
+    t.sigma_given = std::isfinite(targets[k].sigma);
+    if (t.sigma_given) {
+      t.sigma = targets[k].sigma;
+    } else {
+      // Replica spread and surrogate error; floored so a perfect fit of noise-free
+      // data cannot make the misfit infinitely sharp.
+      t.sigma = std::sqrt(t.replica_se * t.replica_se + t.loo_rms * t.loo_rms);
+      t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
+    }
+    values[k] = t.target;
+    sigmas[k] = t.sigma;
+    res.targets.push_back(t);
+  }
+
+  // A target beyond the surrogate's range is unreachable whatever the optimiser says.
+  for (const auto& t : res.targets) {
+    if (t.target > t.hi + opt.reach_sigmas * t.sigma)
+      res.unreachable.push_back(t.metric + " = " + g(t.target) + " is above anything the grid reaches: at most " + g(t.hi) +
+                                " (at " + where(box, t.theta_at_hi, t.eta_at_hi) + "; sigma " + g(t.sigma, 2) +
+                                "); extend the grid beyond that bound");
+    else if (t.target < t.lo - opt.reach_sigmas * t.sigma)
+      res.unreachable.push_back(t.metric + " = " + g(t.target) + " is below anything the grid reaches: at least " + g(t.lo) +
+                                " (at " + where(box, t.theta_at_lo, t.eta_at_lo) + "; sigma " + g(t.sigma, 2) +
+                                "); extend the grid beyond that bound");
+  }
+
+  const Objective obj{&models, &values, &sigmas, &box};
+  std::vector<double> mis(static_cast<std::size_t>(n * n));
+  std::size_t best_cell = 0;
+  for (std::size_t c = 0; c < mis.size(); ++c) {
+    double m = 0;
+    for (std::size_t k = 0; k < K; ++k) {
+      const double r = (val[k][c] - values[k]) / sigmas[k];
+      m += r * r;
+    }
+    mis[c] = m;
+    if (m < mis[best_cell]) best_cell = c;
+  }
+
+  // Global search over the unit square, then a local polish from the best start.
+  std::vector<double> x = {static_cast<double>(best_cell % n) / (n - 1), static_cast<double>(best_cell / n) / (n - 1)};
+  double fbest = mis[best_cell];
+  try {
+    nlopt::opt global(nlopt::GN_DIRECT_L, 2);
+    global.set_lower_bounds({0.0, 0.0});
+    global.set_upper_bounds({1.0, 1.0});
+    global.set_min_objective(nlopt_objective, const_cast<Objective*>(&obj));
+    global.set_maxeval(opt.global_evals);
+    std::vector<double> xg = {0.5, 0.5};
+    double fg = 0;
+    global.optimize(xg, fg);
+    if (fg < fbest) fbest = fg, x = xg;
+  } catch (const std::exception&) {
+    // DIRECT stopping on its own limits is not a failure; the grid start stands.
+  }
+  try {
+    nlopt::opt local(nlopt::LN_BOBYQA, 2);
+    local.set_lower_bounds({0.0, 0.0});
+    local.set_upper_bounds({1.0, 1.0});
+    local.set_min_objective(nlopt_objective, const_cast<Objective*>(&obj));
+    local.set_xtol_abs(1e-9);
+    local.set_maxeval(2000);
+    local.set_initial_step(std::vector<double>{0.5 / (n - 1), 0.5 / (n - 1)});
+    std::vector<double> xl = x;
+    double fl = fbest;
+    local.optimize(xl, fl);
+    if (fl <= fbest) fbest = fl, x = xl;
+  } catch (const std::exception&) {
+  }
+  res.theta = box.theta_lo + x[0] * (box.theta_hi - box.theta_lo);
+  res.eta = box.eta_lo + x[1] * (box.eta_hi - box.eta_lo);
+  res.misfit = fbest;
+  for (std::size_t k = 0; k < K; ++k) {
+    res.targets[k].predicted = models[k].surrogate(res.theta, res.eta);
+    res.targets[k].residual = res.targets[k].predicted - res.targets[k].target;
+  }
+
+  // The region: every fine-grid cell within delta of the minimum.
+  Region& R = res.region;
+  R.n = n;
+  R.mask.assign(static_cast<std::size_t>(n), std::string(static_cast<std::size_t>(n), '0'));
+  R.theta_lo = R.eta_lo = INFINITY;
+  R.theta_hi = R.eta_hi = -INFINITY;
+  auto include = [&](int i, int j) {
+    R.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] = '1';
+    ++R.cells;
+    R.theta_lo = std::min(R.theta_lo, theta_at(i));
+    R.theta_hi = std::max(R.theta_hi, theta_at(i));
+    R.eta_lo = std::min(R.eta_lo, eta_at(j));
+    R.eta_hi = std::max(R.eta_hi, eta_at(j));
+    if (i == 0) R.at_theta_lo = true;
+    if (i == n - 1) R.at_theta_hi = true;
+    if (j == 0) R.at_eta_lo = true;
+    if (j == n - 1) R.at_eta_hi = true;
+  };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i)
+      if (mis[static_cast<std::size_t>(j * n + i)] <= fbest + opt.delta) include(i, j);
+  if (R.cells == 0) include(static_cast<int>(std::lround(x[0] * (n - 1))), static_cast<int>(std::lround(x[1] * (n - 1))));
+  // Extents to the cell edges at the grid resolution (the region is at least one cell).
+  const double hc = 0.5 * (box.theta_hi - box.theta_lo) / (n - 1), he = 0.5 * (box.eta_hi - box.eta_lo) / (n - 1);
+  R.theta_lo = std::max(box.theta_lo, R.theta_lo - hc);
+  R.theta_hi = std::min(box.theta_hi, R.theta_hi + hc);
+  R.eta_lo = std::max(box.eta_lo, R.eta_lo - he);
+  R.eta_hi = std::min(box.eta_hi, R.eta_hi + he);
+
+  // A large residual at the best point: on a bound, the targets lie beyond it; with
+  // no more targets than unknowns, no point of the grid matches them together.
+  // (With more targets than unknowns a mismatch is reported as a warning below.)
+  const bool on_bound = x[0] < 1e-3 || x[0] > 1 - 1e-3 || x[1] < 1e-3 || x[1] > 1 - 1e-3;
+  if (res.unreachable.empty() && (on_bound || K <= 2)) {
+    for (const auto& t : res.targets)
+      if (std::abs(t.residual) > opt.reach_sigmas * t.sigma)
+        res.unreachable.push_back(
+            (on_bound ? "the closest match lies on the edge of the grid, at " + where(box, res.theta, res.eta) +
+                            ", and still misses "
+                      : "no (theta, eta) inside the grid matches the targets together: the closest point, at " +
+                            where(box, res.theta, res.eta) + ", misses ") +
+            t.metric + " = " + g(t.target) + " by " + g(t.residual, 3) + " (" + g(std::abs(t.residual) / t.sigma, 2) +
+            " sigma)" + (on_bound ? ": the targets lie beyond that bound; extend the grid" : ""));
+  }
+  res.ok = res.unreachable.empty();
+
+  // Identifiability.
+  const double wt = box.theta_hi - box.theta_lo, we = box.eta_hi - box.eta_lo;
+  const double ft = (R.theta_hi - R.theta_lo) / wt, fe = (R.eta_hi - R.eta_lo) / we;
+  if (K < 2)
+    res.warnings.push_back("one target for two unknowns (theta, eta): the targets are matched along a curve, not at a point; "
+                           "the best point is one of many (add a second target, e.g. phi_peak with phi_cv)");
+  if (res.ok) {
+    if (R.at_theta_lo && R.at_theta_hi)
+      res.warnings.push_back("theta is not pinned down: the 95% region spans the whole theta range of the grid [" + g(box.theta_lo) +
+                             ", " + g(box.theta_hi) + "] deg");
+    else if (R.at_theta_lo || R.at_theta_hi)
+      res.warnings.push_back("the 95% region reaches the theta " + std::string(R.at_theta_lo ? "lower" : "upper") + " bound (" +
+                             g(R.at_theta_lo ? box.theta_lo : box.theta_hi) + " deg): the grid cuts it off; extend the grid there");
+    if (R.at_eta_lo && R.at_eta_hi)
+      res.warnings.push_back("eta is not pinned down: the 95% region spans the whole eta range of the grid [" + g(box.eta_lo) + ", " +
+                             g(box.eta_hi) + "]");
+    else if (R.at_eta_lo || R.at_eta_hi)
+      res.warnings.push_back("the 95% region reaches the eta " + std::string(R.at_eta_lo ? "lower" : "upper") + " bound (" +
+                             g(R.at_eta_lo ? box.eta_lo : box.eta_hi) + "): the grid cuts it off; extend the grid there");
+    if (std::max(ft, fe) > 0.3 && std::max(ft, fe) > 4 * std::min(ft, fe))
+      res.warnings.push_back(std::string("the 95% region is elongated along ") + (ft > fe ? "theta" : "eta") + " (" +
+                             g(100 * ft, 2) + "% of the theta range, " + g(100 * fe, 2) + "% of the eta range): " +
+                             (ft > fe ? "theta" : "eta") + " is poorly determined by these targets");
+    // A target that barely changes across an axis near the answer cannot pin that axis.
+    for (std::size_t k = 0; k < K; ++k) {
+      const auto& s = models[k].surrogate;
+      const double ht = 0.01 * wt, he2 = 0.01 * we;
+      const double t0 = std::clamp(res.theta, box.theta_lo + ht, box.theta_hi - ht);
+      const double e0 = std::clamp(res.eta, box.eta_lo + he2, box.eta_hi - he2);
+      const double dth = (s(t0 + ht, e0) - s(t0 - ht, e0)) / (2 * ht) * wt * 0.25;
+      const double det = (s(t0, e0 + he2) - s(t0, e0 - he2)) / (2 * he2) * we * 0.25;
+      if (std::abs(dth) < res.targets[k].sigma)
+        res.warnings.push_back(res.targets[k].metric + " is nearly flat in theta near the best point (changes by " + g(dth, 2) +
+                               " over a quarter of the theta range, less than its sigma " + g(res.targets[k].sigma, 2) +
+                               "): it cannot pin theta there");
+      if (std::abs(det) < res.targets[k].sigma)
+        res.warnings.push_back(res.targets[k].metric + " is nearly flat in eta near the best point (changes by " + g(det, 2) +
+                               " over a quarter of the eta range, less than its sigma " + g(res.targets[k].sigma, 2) +
+                               "): it cannot pin eta there");
+    }
+    const int dof = static_cast<int>(K) - 2;
+    const double limit = dof >= 1 ? chi2_quantile(dof, 2.326) : 9.0;
+    if (res.misfit > limit)
+      res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) + " at the best point (" +
+                             (dof >= 1 ? "above the 99% chi-square level " + g(limit, 3) + " for " + std::to_string(dof) + " dof"
+                                       : std::string("residuals above 2 sigma")) +
+                             "); no (theta, eta) in the grid reproduces all of them");
+  }
+  return res;
+}
+
+nlohmann::json FitResult::to_json() const {
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  nlohmann::json j;
+  j["status"] = ok ? "ok" : "unreachable";
+  j["box"] = {{"theta_lo", box.theta_lo}, {"theta_hi", box.theta_hi}, {"eta_lo", box.eta_lo}, {"eta_hi", box.eta_hi}};
+  if (ok) {
+    j["theta_deg"] = num(theta);
+    j["eta"] = num(eta);
+  } else {
+    // Kept for the record, never as an answer.
+    j["closest_theta_deg"] = num(theta);
+    j["closest_eta"] = num(eta);
+  }
+  j["misfit"] = num(misfit);
+  j["targets"] = nlohmann::json::array();
+  for (const auto& t : targets)
+    j["targets"].push_back({{"metric", t.metric}, {"job", t.job}, {"target", num(t.target)}, {"sigma", num(t.sigma)},
+                            {"sigma_given", t.sigma_given}, {"predicted", num(t.predicted)}, {"residual", num(t.residual)},
+                            {"loo_rms", num(t.loo_rms)}, {"replica_se", num(t.replica_se)}, {"range", {num(t.lo), num(t.hi)}}});
+  j["region"] = {{"level", "misfit - min <= 5.99 (95%, 2 parameters)"},
+                 {"theta_deg", {num(region.theta_lo), num(region.theta_hi)}},
+                 {"eta", {num(region.eta_lo), num(region.eta_hi)}},
+                 {"cells", region.cells},
+                 {"n", region.n},
+                 {"mask", region.mask}};
+  j["warnings"] = warnings;
+  j["unreachable"] = unreachable;
+  j["method"] = method;
+  return j;
+}
+
+}  // namespace demcal::calibrate

@@ -1,0 +1,76 @@
+#pragma once
+// The inverse fit: targets for some metrics in, the (theta, eta) whose surrogates
+// match them best out, with the region consistent with the targets, warnings when
+// the targets do not pin the parameters down, and a refusal (not a boundary point)
+// when a target lies beyond what the grid reaches.
+#include "surrogate.hpp"
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace demcal::calibrate {
+
+struct Target {
+  std::string metric;
+  double value = kNaN;
+  double sigma = kNaN;  // given by the user; NaN: from replica spread and surrogate error
+};
+
+// "phi_peak=41.4" -> {phi_peak, 41.4}. Throws JobError(field) when malformed.
+Target parse_target(const std::string& text, const std::string& field = "--target");
+// "phi_peak=0.5" sets the sigma of that target; throws JobError("--sigma") when
+// malformed, not positive, or naming no target.
+void apply_sigma(std::vector<Target>& targets, const std::string& text);
+
+// One metric's surrogate and what goes into its uncertainty.
+struct Model {
+  std::string metric, label, job;
+  Surrogate surrogate;
+  double replica_se = 0;
+};
+
+struct TargetFit {
+  std::string metric, job;
+  double target = kNaN, sigma = kNaN;
+  bool sigma_given = false;
+  double predicted = kNaN, residual = kNaN;  // residual = predicted - target
+  double loo_rms = kNaN, replica_se = kNaN;
+  double lo = kNaN, hi = kNaN;  // the surrogate's range over the box
+  double theta_at_lo = kNaN, eta_at_lo = kNaN, theta_at_hi = kNaN, eta_at_hi = kNaN;
+};
+
+struct Region {
+  double theta_lo = kNaN, theta_hi = kNaN, eta_lo = kNaN, eta_hi = kNaN;
+  int cells = 0, n = 0;  // cells inside, of n x n
+  bool at_theta_lo = false, at_theta_hi = false, at_eta_lo = false, at_eta_hi = false;
+  // Row j (eta index, from eta_lo) holds n characters, '1' inside; cell (i, j) sits
+  // at theta_lo + i (theta_hi - theta_lo)/(n - 1) of the box, same for eta.
+  std::vector<std::string> mask;
+  bool contains(const Box& box, double theta, double eta) const;
+};
+
+struct FitOptions {
+  int region_n = 161;      // fine grid over the box, per axis
+  double delta = 5.99;     // misfit - min for 95% with 2 parameters (chi-square, 2 dof)
+  int global_evals = 3000; // GN_DIRECT_L evaluations
+  double reach_sigmas = 2; // a target further than this many sigma beyond the surrogate's range is unreachable
+};
+
+struct FitResult {
+  Box box;
+  bool ok = false;  // false: some target is unreachable (see `unreachable`); theta, eta are no answer
+  double theta = kNaN, eta = kNaN, misfit = kNaN;
+  std::vector<TargetFit> targets;
+  Region region;
+  std::vector<std::string> warnings, unreachable;
+  std::string method;
+  nlohmann::json to_json() const;
+};
+
+// models[k] is the surrogate for targets[k]. Throws std::invalid_argument when
+// the sizes disagree or the box is empty.
+FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
+                 const FitOptions& options = {});
+
+}  // namespace demcal::calibrate

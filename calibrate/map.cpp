@@ -1,0 +1,277 @@
+#include "map.hpp"
+
+#include "jobs/job_error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace demcal::calibrate {
+namespace {
+
+namespace fs = std::filesystem;
+
+// As jobs/series_plot.cpp: single-quoted gnuplot strings, gnuplot run without a shell.
+std::string quoted(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string extension_of(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+std::string terminal_line(const std::string& ext) {
+  if (ext == ".svg") return "set terminal svg size 900,700 dynamic enhanced\n";
+  return "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) { set terminal pngcairo size 900,700 } "
+         "else { set terminal png size 900,700 }\n";
+}
+
+void run_gnuplot(const std::string& script) {
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
+  if (pid == 0) {
+    execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  int st = 0;
+  waitpid(pid, &st, 0);
+  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
+  if (WEXITSTATUS(st) != 0) throw std::runtime_error("gnuplot failed (exit status " + std::to_string(WEXITSTATUS(st)) + ")");
+}
+
+std::size_t nearest(const std::vector<double>& axis, double x) {
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < axis.size(); ++i)
+    if (std::abs(axis[i] - x) < std::abs(axis[best] - x)) best = i;
+  return best;
+}
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+struct Segment {
+  std::string level;
+  std::vector<std::pair<double, double>> pts;
+};
+
+// gnuplot's contour table: "# Contour k, label: L" headers, "x y z" lines, blank
+// lines between pieces.
+std::vector<Segment> read_contours(const std::string& path) {
+  std::vector<Segment> out;
+  std::ifstream in(path);
+  std::string line, level;
+  Segment cur;
+  auto flush = [&] {
+    if (cur.pts.size() >= 2) out.push_back(cur);
+    cur.pts.clear();
+    cur.level = level;
+  };
+  while (std::getline(in, line)) {
+    if (line.empty() || line.find_first_not_of(" \t\r") == std::string::npos) {
+      flush();
+      continue;
+    }
+    if (line[0] == '#') {
+      const auto at = line.find("label:");
+      if (at != std::string::npos) {
+        flush();
+        std::istringstream ls(line.substr(at + 6));
+        ls >> level;
+        cur.level = level;
+      }
+      continue;
+    }
+    std::istringstream ls(line);
+    double x = 0, y = 0;
+    if (ls >> x >> y) cur.pts.emplace_back(x, y);
+  }
+  flush();
+  return out;
+}
+
+}  // namespace
+
+void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
+  const std::string ext = extension_of(r.out);
+  if (ext != ".png" && ext != ".svg") throw jobs::JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
+  if (rs.thetas.size() < 2 || rs.etas.size() < 2)
+    throw jobs::JobError("--job", "job \"" + rs.job + "\" has " + std::to_string(rs.thetas.size()) + " theta value(s) and " +
+                                      std::to_string(rs.etas.size()) + " eta value(s); a map needs at least 2 of each");
+  const Box b = rs.box();
+  // Grid nodes: the axis product; a node without a value (or without a task) is a hole.
+  std::map<std::pair<std::size_t, std::size_t>, const GridPoint*> node;
+  for (const auto& p : rs.points)
+    if (!p.refine) node[{nearest(rs.thetas, p.theta), nearest(rs.etas, p.eta)}] = &p;
+  auto masked = [&](double th, double et) {
+    const auto it = node.find({nearest(rs.thetas, th), nearest(rs.etas, et)});
+    return it == node.end() || it->second->hole();
+  };
+  std::vector<std::pair<double, double>> holes;
+  for (std::size_t i = 0; i < rs.thetas.size(); ++i)
+    for (std::size_t j = 0; j < rs.etas.size(); ++j) {
+      const auto it = node.find({i, j});
+      if (it == node.end() || it->second->hole()) holes.emplace_back(rs.thetas[i], rs.etas[j]);
+    }
+
+  const auto tmp = fs::temp_directory_path() / ("demcal-map-" + std::to_string(getpid()));
+  fs::create_directories(tmp);
+  auto path = [&](const char* n) { return (tmp / n).string(); };
+  struct Cleanup {
+    fs::path p;
+    ~Cleanup() {
+      std::error_code ec;
+      fs::remove_all(p, ec);
+    }
+  } cleanup{tmp};
+
+  // SVG writes every quadrangle as a path: fewer of them keep the file small.
+  const int n = std::max(21, ext == ".svg" ? std::min(r.fine, 81) : r.fine);
+  double zlo = INFINITY, zhi = -INFINITY;
+  {
+    std::ofstream full(path("full.dat")), shown(path("shown.dat"));
+    for (int i = 0; i < n; ++i) {
+      const double th = b.theta_lo + (b.theta_hi - b.theta_lo) * i / (n - 1);
+      for (int j = 0; j < n; ++j) {
+        const double et = b.eta_lo + (b.eta_hi - b.eta_lo) * j / (n - 1);
+        const double z = s(th, et);
+        full << num(th) << " " << num(et) << " " << num(z) << "\n";
+        const bool hide = masked(th, et);
+        shown << num(th) << " " << num(et) << " " << (hide ? std::string("NaN") : num(z)) << "\n";
+        if (!hide) zlo = std::min(zlo, z), zhi = std::max(zhi, z);
+      }
+      full << "\n";
+      shown << "\n";
+    }
+    std::ofstream pts(path("points.dat")), ref(path("refine.dat")), hol(path("holes.dat"));
+    for (const auto& p : rs.points)
+      if (!p.hole()) (p.refine ? ref : pts) << num(p.theta) << " " << num(p.eta) << "\n";
+    for (const auto& h : holes) hol << num(h.first) << " " << num(h.second) << "\n";
+    if (holes.empty()) hol << "NaN NaN\n";
+    if (r.overlay) {
+      const auto& o = *r.overlay;
+      std::ofstream m(path("mask.dat")), best(path("best.dat"));
+      const int rn = o.region.n;
+      for (int i = 0; i < rn; ++i) {
+        const double th = o.box.theta_lo + (o.box.theta_hi - o.box.theta_lo) * i / (rn - 1);
+        for (int j = 0; j < rn; ++j) {
+          const double et = o.box.eta_lo + (o.box.eta_hi - o.box.eta_lo) * j / (rn - 1);
+          m << num(th) << " " << num(et) << " " << o.region.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] << "\n";
+        }
+        m << "\n";
+      }
+      best << num(o.theta) << " " << num(o.eta) << "\n";
+    }
+  }
+  // Pass 1: contour lines as tables.
+  {
+    std::ofstream g(path("tables.gp"));
+    g << "set contour base\nunset surface\nset cntrparam levels auto 10\n"
+      << "set table " << quoted(path("cont.dat")) << "\nsplot " << quoted(path("full.dat")) << " using 1:2:3 with lines\nunset table\n";
+    if (r.overlay)
+      g << "set cntrparam levels discrete 0.5\nset table " << quoted(path("region.dat")) << "\nsplot " << quoted(path("mask.dat"))
+        << " using 1:2:3 with lines\nunset table\n";
+  }
+  run_gnuplot(path("tables.gp"));
+  // Iso-lines only where the surface is drawn: cut them at the holes' cells.
+  std::vector<Segment> kept;
+  for (const auto& seg : read_contours(path("cont.dat"))) {
+    Segment cur{seg.level, {}};
+    for (const auto& p : seg.pts) {
+      if (masked(p.first, p.second)) {
+        if (cur.pts.size() >= 2) kept.push_back(cur);
+        cur.pts.clear();
+      } else {
+        cur.pts.push_back(p);
+      }
+    }
+    if (cur.pts.size() >= 2) kept.push_back(cur);
+  }
+  std::map<std::string, const Segment*> longest;
+  {
+    std::ofstream c(path("iso.dat"));
+    for (const auto& seg : kept) {
+      for (const auto& p : seg.pts) c << num(p.first) << " " << num(p.second) << "\n";
+      c << "\n";
+      auto& l = longest[seg.level];
+      if (!l || seg.pts.size() > l->pts.size()) l = &seg;
+    }
+    if (kept.empty()) c << "NaN NaN\n";
+  }
+
+  std::ofstream g(path("map.gp"));
+  char title[400];
+  std::snprintf(title, sizeof title, "%s, job %s: %d points with data, %d holes; %s", rs.label.c_str(), rs.job.c_str(),
+                rs.with_data(), rs.holes(), s.describe().c_str());
+  g << terminal_line(ext) << "set output " << quoted(r.out) << "\n"
+    << "set title " << quoted(r.title.empty() ? title : r.title) << " noenhanced font ',10'\n"
+    << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel " << quoted(rs.label) << " noenhanced\n"
+    << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
+    << "]\nset view map\nset datafile missing 'NaN'\nset palette rgbformulae 33,13,10\n"
+    << "set bmargin at screen 0.17\nset key at screen 0.5,0.07 center horizontal maxrows 2\n"
+    << "set style textbox opaque noborder\n";
+  if (zhi > zlo) g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";
+  int label = 1;
+  for (const auto& [level, seg] : longest) {
+    if (seg->pts.size() < 4) continue;
+    const auto& p = seg->pts[seg->pts.size() / 2];
+    g << "set label " << label++ << " " << quoted(level) << " at " << num(p.first) << "," << num(p.second)
+      << ",0 center front boxed font ',8'\n";
+  }
+  g << "splot " << quoted(path("shown.dat")) << " using 1:2:3 with pm3d notitle, \\\n  " << quoted(path("iso.dat"))
+    << " using 1:2:(0) with lines lc rgb 'black' lw 1 title 'iso-lines', \\\n  " << quoted(path("points.dat"))
+    << " using 1:2:(0) with points pt 7 ps 0.9 lc rgb 'black' title 'grid points', \\\n  " << quoted(path("holes.dat"))
+    << " using 1:2:(0) with points pt 2 ps 2.5 lw 3 lc rgb 'red' title 'holes (failed or missing)'";
+  if (fs::file_size(path("refine.dat")) > 0)
+    g << ", \\\n  " << quoted(path("refine.dat")) << " using 1:2:(0) with points pt 6 ps 1.2 lw 2 lc rgb 'black' title 'refinement runs'";
+  if (r.overlay)
+    g << ", \\\n  " << quoted(path("region.dat")) << " using 1:2:(0) with lines lw 3 lc rgb 'magenta' title '95% region (fit "
+      << r.overlay->fit_id << ")', \\\n  " << quoted(path("best.dat"))
+      << " using 1:2:(0) with points pt 3 ps 3 lw 3 lc rgb 'magenta' title 'best fit'";
+  g << "\n";
+  g.close();
+  run_gnuplot(path("map.gp"));
+  if (!fs::exists(r.out) || fs::file_size(r.out) == 0) throw std::runtime_error("gnuplot wrote nothing to " + r.out);
+}
+
+std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job) {
+  const auto rows = store.fits();
+  for (auto it = rows.rbegin(); it != rows.rend(); ++it) {
+    const auto j = nlohmann::json::parse(it->result_json, nullptr, false);
+    if (j.is_discarded() || j.value("status", "") != "ok" || !j.contains("jobs") || !j["jobs"].is_array()) continue;
+    bool uses = false;
+    for (const auto& name : j["jobs"])
+      if (name.is_string() && name.get<std::string>() == job) uses = true;
+    if (!uses) continue;
+    try {
+      MapOverlay o;
+      o.fit_id = it->id;
+      o.box = {j["box"]["theta_lo"].get<double>(), j["box"]["theta_hi"].get<double>(), j["box"]["eta_lo"].get<double>(),
+               j["box"]["eta_hi"].get<double>()};
+      o.region.n = j["region"]["n"].get<int>();
+      o.region.mask = j["region"]["mask"].get<std::vector<std::string>>();
+      o.theta = j["theta_deg"].get<double>();
+      o.eta = j["eta"].get<double>();
+      if (o.region.n < 2 || static_cast<int>(o.region.mask.size()) != o.region.n) continue;
+      return o;
+    } catch (const nlohmann::json::exception&) {
+      continue;
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace demcal::calibrate

@@ -1,0 +1,40 @@
+#include "metric.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace demcal::calibrate {
+
+const std::vector<std::string>& metric_aliases() {
+  static const std::vector<std::string> names = {"phi_peak", "phi_cv", "phi_diff", "repose"};
+  return names;
+}
+
+bool is_alias(const std::string& name) {
+  const auto& a = metric_aliases();
+  return std::find(a.begin(), a.end(), name) != a.end();
+}
+
+MetricSpec metric_spec(const std::string& name) {
+  if (name == "phi_peak") return {name, "phi_peak (deg)", "phi_peak_deg", ""};
+  if (name == "phi_cv") return {name, "phi_cv (deg)", "phi_cv_deg", ""};
+  if (name == "phi_diff") return {name, "phi_peak - phi_cv (deg)", "phi_peak_deg", "phi_cv_deg"};
+  if (name == "repose") return {name, "angle of repose (deg)", "repose_deg", ""};
+  return {name, name, name, ""};
+}
+
+std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std::pair<std::string, double>>& metrics) {
+  auto find = [&](const std::string& n) -> std::optional<double> {
+    for (const auto& [k, v] : metrics)
+      if (k == n && std::isfinite(v)) return v;
+    return std::nullopt;
+  };
+  const auto a = find(spec.plus);
+  if (!a) return std::nullopt;
+  if (spec.minus.empty()) return a;
+  const auto b = find(spec.minus);
+  if (!b) return std::nullopt;
+  return *a - *b;
+}
+
+}  // namespace demcal::calibrate

@@ -1,0 +1,27 @@
+#pragma once
+// Calibration metrics by name: the short names the CLI takes (phi_peak, phi_cv,
+// phi_diff, repose) and any metric a scene stores under its own name.
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace demcal::calibrate {
+
+struct MetricSpec {
+  std::string name;   // as asked: "phi_peak" or a stored name
+  std::string label;  // for plots and tables, e.g. "phi_peak (deg)"
+  std::string plus;   // stored metric
+  std::string minus;  // stored metric subtracted from `plus` ("" for none)
+};
+
+// phi_peak, phi_cv, phi_diff, repose.
+const std::vector<std::string>& metric_aliases();
+// The alias, or a stored metric name used as it is.
+MetricSpec metric_spec(const std::string& name);
+bool is_alias(const std::string& name);
+// The value for one task, or nothing when the task lacks a stored metric it needs
+// or the value is not finite.
+std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std::pair<std::string, double>>& metrics);
+
+}  // namespace demcal::calibrate

@@ -1,0 +1,218 @@
+#include "response_surface.hpp"
+
+#include "jobs/job_error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+namespace demcal::calibrate {
+namespace {
+
+using jobs::JobError;
+
+std::string join(const std::vector<std::string>& v, std::size_t max = 12) {
+  std::string s;
+  for (std::size_t i = 0; i < v.size() && i < max; ++i) s += (i ? ", " : "") + v[i];
+  if (v.size() > max) s += ", ...";
+  return s;
+}
+
+
+bool number_of(const nlohmann::json& p, const char* key, double& out) {
+  if (!p.is_object() || !p.contains(key) || !p[key].is_number()) return false;
+  out = p[key].get<double>();
+  return true;
+}
+
+}  // namespace
+
+Box ResponseSurface::box() const {
+  Box b;
+  if (thetas.empty() || etas.empty()) return b;
+  b.theta_lo = thetas.front();
+  b.theta_hi = thetas.back();
+  b.eta_lo = etas.front();
+  b.eta_hi = etas.back();
+  return b;
+}
+
+int ResponseSurface::holes() const {
+  int n = 0;
+  for (const auto& p : points) n += p.hole() && !p.refine;
+  return n;
+}
+
+int ResponseSurface::with_data() const {
+  int n = 0;
+  for (const auto& p : points) n += !p.hole();
+  return n;
+}
+
+double ResponseSurface::replica_se() const {
+  if (!std::isfinite(pooled_sd)) return 0.0;
+  double total = 0;
+  int k = 0;
+  for (const auto& p : points)
+    if (!p.hole()) {
+      total += p.n();
+      ++k;
+    }
+  return k ? pooled_sd / std::sqrt(total / k) : 0.0;
+}
+
+void ResponseSurface::summarise() {
+  double ss = 0;
+  int dof = 0;
+  for (auto& p : points) {
+    p.mean = p.sd = p.se = kNaN;
+    if (p.hole()) continue;
+    double m = 0;
+    for (double v : p.values) m += v;
+    m /= p.n();
+    p.mean = m;
+    if (p.n() < 2) continue;
+    double s2 = 0;
+    for (double v : p.values) s2 += (v - m) * (v - m);
+    ss += s2;
+    dof += p.n() - 1;
+    p.sd = std::sqrt(s2 / (p.n() - 1));
+    p.se = p.sd / std::sqrt(static_cast<double>(p.n()));
+  }
+  pooled_sd = dof > 0 ? std::sqrt(ss / dof) : kNaN;
+}
+
+std::string refine_job_name(const std::string& job, int round) { return job + ".refine" + std::to_string(round); }
+
+bool is_refine_job(const std::string& name) {
+  const auto at = name.rfind(".refine");
+  if (at == std::string::npos || at + 7 >= name.size()) return false;
+  return std::all_of(name.begin() + static_cast<long>(at) + 7, name.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job) {
+  std::vector<std::pair<int, std::string>> found;
+  const std::string prefix = job + ".refine";
+  for (const auto& [name, counts] : store.counts("")) {
+    (void)counts;
+    if (name.rfind(prefix, 0) == 0 && is_refine_job(name) &&
+        name.find('.', prefix.size()) == std::string::npos)
+      found.emplace_back(std::stoi(name.substr(prefix.size())), name);
+  }
+  std::sort(found.begin(), found.end());
+  std::vector<std::string> out;
+  for (auto& f : found) out.push_back(f.second);
+  return out;
+}
+
+std::vector<std::string> base_jobs(db::Store& store) {
+  std::vector<std::string> out;
+  for (const auto& [name, counts] : store.counts("")) {
+    (void)counts;
+    if (!is_refine_job(name)) out.push_back(name);
+  }
+  return out;
+}
+
+ResponseSurface gather(db::Store& store, const std::string& job, const std::string& metric,
+                       const GatherOptions& opt) {
+  if (!store.find_job(job)) {
+    const auto all = base_jobs(store);
+    throw JobError("--job", "no job named \"" + job + "\"" +
+                                (all.empty() ? " (the database holds no jobs)" : " (jobs: " + join(all) + ")"));
+  }
+  ResponseSurface rs;
+  rs.job = job;
+  rs.metric = metric;
+  const MetricSpec spec = metric_spec(metric);
+  rs.label = spec.label;
+
+  struct Row {
+    jobs::ResultRow r;
+    bool refine;
+  };
+  std::vector<Row> rows;
+  for (auto& r : jobs::select_rows(store, job, opt.where)) rows.push_back({std::move(r), false});
+  if (opt.include_refine)
+    for (const auto& sub : refine_jobs_of(store, job))
+      for (auto& r : jobs::select_rows(store, sub, opt.where)) rows.push_back({std::move(r), true});
+  if (rows.empty())
+    throw JobError(opt.where.empty() ? "--job" : "--where",
+                   "no data: job \"" + job + "\" has no tasks" + (opt.where.empty() ? "" : " matching the filters"));
+
+  // A stored metric nobody has is an unknown metric, not missing data.
+  std::set<std::string> stored;
+  for (const auto& row : rows)
+    for (const auto& m : row.r.metrics) stored.insert(m.first);
+  if (!is_alias(metric) && !stored.count(metric)) {
+    std::string known = join(metric_aliases());
+    throw JobError(opt.field, "unknown metric \"" + metric + "\" (expected " + known +
+                                  (stored.empty() ? std::string() : ", or one job \"" + job + "\" stores: " +
+                                                                        join(std::vector<std::string>(stored.begin(), stored.end()))) +
+                                  ")");
+  }
+
+  // Only replicas may be averaged: any other parameter that varies must be pinned.
+  std::map<std::string, std::set<std::string>> seen;
+  for (const auto& row : rows)
+    for (const auto& [k, v] : row.r.params.items())
+      if (k != "seed" && k != "theta_deg" && k != "eta") seen[k].insert(v.dump());
+  for (const auto& [k, vals] : seen)
+    if (vals.size() > 1)
+      throw JobError("--where", "job \"" + job + "\" varies " + k + " (" + join(std::vector<std::string>(vals.begin(), vals.end())) +
+                                    ") besides theta_deg and eta; pick one with --where " + k + "=VALUE");
+
+  std::map<std::pair<long long, long long>, std::size_t> index;  // rounded (theta, eta) -> point
+  std::set<double> thetas, etas;
+  int done = 0, failed = 0, unfinished = 0;
+  for (const auto& row : rows) {
+    double th = 0, et = 0;
+    if (!number_of(row.r.params, "theta_deg", th) || !number_of(row.r.params, "eta", et))
+      throw JobError("--job", "job \"" + job + "\" has tasks without theta_deg and eta parameters (scene " +
+                                  row.r.task.scene + "); calibration needs a grid over both");
+    const auto key = std::make_pair(std::llround(th * 1e9), std::llround(et * 1e9));
+    auto it = index.find(key);
+    if (it == index.end()) {
+      it = index.emplace(key, rs.points.size()).first;
+      GridPoint p;
+      p.theta = th;
+      p.eta = et;
+      p.refine = row.refine;
+      rs.points.push_back(p);
+    }
+    GridPoint& p = rs.points[it->second];
+    if (!row.refine) {
+      p.refine = false;  // a refinement point that coincides with the grid is a grid point
+      thetas.insert(th);
+      etas.insert(et);
+    }
+    const auto& st = row.r.task.status;
+    if (st == "done") {
+      ++done;
+      if (auto v = metric_value(spec, row.r.metrics))
+        p.values.push_back(*v);
+      else
+        ++p.missing;
+    } else if (st == "failed") {
+      ++failed;
+      ++p.failed;
+    } else {
+      ++unfinished;
+      ++p.unfinished;
+    }
+  }
+  // Grid points first, then refinement points.
+  std::stable_partition(rs.points.begin(), rs.points.end(), [](const GridPoint& p) { return !p.refine; });
+  rs.thetas.assign(thetas.begin(), thetas.end());
+  rs.etas.assign(etas.begin(), etas.end());
+  rs.summarise();
+  if (rs.with_data() == 0)
+    throw JobError("--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) + " tasks has a stored " +
+                                (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) + " (" +
+                                std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
+                                std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
+  return rs;
+}
+
+}  // namespace demcal::calibrate

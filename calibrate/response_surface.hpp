@@ -1,0 +1,68 @@
+#pragma once
+// A response surface: one calibration metric over the (theta, eta) grid of a job,
+// replicas averaged with their spread kept, and the grid points that have no value
+// (failed, unfinished or missing tasks) kept as holes.
+#include "metric.hpp"
+
+#include "db/store.hpp"
+#include "jobs/query.hpp"
+
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace demcal::calibrate {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct GridPoint {
+  double theta = 0, eta = 0;   // theta in degrees
+  std::vector<double> values;  // one per replica with a value
+  double mean = kNaN, sd = kNaN, se = kNaN;  // sd, se: NaN with fewer than 2 replicas
+  int failed = 0, unfinished = 0, missing = 0;  // tasks without a value, by reason
+  bool refine = false;         // added by `demcal fit --refine`, not part of the job's grid
+  int n() const { return static_cast<int>(values.size()); }
+  bool hole() const { return values.empty(); }
+};
+
+struct Box {
+  double theta_lo = 0, theta_hi = 0, eta_lo = 0, eta_hi = 0;
+};
+
+struct ResponseSurface {
+  std::string job, metric, label;
+  std::vector<GridPoint> points;     // grid points first (job order), then refinement points
+  std::vector<double> thetas, etas;  // the job grid's distinct axis values, ascending
+  double pooled_sd = kNaN;           // replica standard deviation pooled over points with n >= 2
+
+  Box box() const;                   // the job grid's bounds
+  int holes() const;
+  int with_data() const;
+  // Standard error of a mean of a typical point: pooled_sd / sqrt(mean replica count);
+  // 0 when no point has replicas (then the spread is unknown, and only the
+  // surrogate's leave-one-out error measures the noise).
+  double replica_se() const;
+  // Fills mean, sd, se and pooled_sd from the values.
+  void summarise();
+};
+
+struct GatherOptions {
+  std::vector<jobs::Where> where;  // filters on task parameters, as in `demcal query`
+  bool include_refine = true;      // points from the job's refinement rounds
+  std::string field = "--metric";  // the option named in errors about the metric
+};
+
+// Reads the metric for every task of `job` (and its refinement sub-jobs) and groups
+// by (theta_deg, eta). Throws JobError naming the option for bad input: no such job,
+// unknown metric, no data, tasks varying another parameter besides theta and eta.
+ResponseSurface gather(db::Store& store, const std::string& job, const std::string& metric,
+                       const GatherOptions& options = {});
+
+// Refinement rounds of job J are stored as jobs named J.refine<k>.
+std::string refine_job_name(const std::string& job, int round);
+bool is_refine_job(const std::string& name);
+std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job);
+// Jobs that are not refinement sub-jobs, by name.
+std::vector<std::string> base_jobs(db::Store& store);
+
+}  // namespace demcal::calibrate

@@ -1,0 +1,117 @@
+// demcal fit: invert target angles into (theta, eta) through surrogates of the
+// stored response surfaces; optionally refine with DEM runs around the answer.
+#include "common.hpp"
+
+#include "calibrate/calibration.hpp"
+#include "db/store.hpp"
+#include "jobs/job_error.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+namespace demcal::cli {
+namespace {
+
+std::string g(double v, int digits = 4) {
+  if (!std::isfinite(v)) return "-";
+  char b[40];
+  std::snprintf(b, sizeof b, "%.*g", digits, v);
+  return b;
+}
+
+void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_t fit_id) {
+  const auto& r = cal.result;
+  out << "fit " << fit_id << " (" << r.method << ")\n";
+  out << "box: theta " << g(r.box.theta_lo) << " .. " << g(r.box.theta_hi) << " deg, eta " << g(r.box.eta_lo) << " .. "
+      << g(r.box.eta_hi) << "\n";
+  out << "surrogates:\n";
+  for (std::size_t k = 0; k < cal.models.size(); ++k) {
+    const auto& m = cal.models[k];
+    out << "  " << m.metric << " (job " << m.job << "): " << m.surrogate.describe() << ", " << cal.surfaces[k].holes()
+        << " hole(s), replica se " << g(m.replica_se, 3) << "\n";
+  }
+  if (r.ok) {
+    out << "best: theta = " << g(r.theta) << " deg, eta = " << g(r.eta) << " (misfit " << g(r.misfit, 3) << ")\n";
+  } else {
+    out << "best: none (a target is out of reach; see below)\n";
+  }
+  char line[200];
+  std::snprintf(line, sizeof line, "  %-12s %10s %8s %10s %10s\n", "metric", "target", "sigma", "predicted", "residual");
+  out << line;
+  for (const auto& t : r.targets) {
+    std::snprintf(line, sizeof line, "  %-12s %10s %8s %10s %10s%s\n", t.metric.c_str(), g(t.target).c_str(),
+                  g(t.sigma, 3).c_str(), r.ok ? g(t.predicted).c_str() : "-", r.ok ? g(t.residual, 3).c_str() : "-",
+                  t.sigma_given ? "" : "  (sigma from replica spread and LOO error)");
+    out << line;
+  }
+  if (r.ok)
+    out << "95% region (misfit - min <= 5.99): theta " << g(r.region.theta_lo) << " .. " << g(r.region.theta_hi) << " deg, eta "
+        << g(r.region.eta_lo) << " .. " << g(r.region.eta_hi) << "\n";
+  for (const auto& w : r.warnings) out << "warning: " << w << "\n";
+  for (const auto& u : r.unreachable) out << "unreachable: " << u << "\n";
+}
+
+}  // namespace
+
+void add_fit(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("fit", "Invert target angles into (theta, eta) from the stored grid results");
+  struct Args {
+    std::string db = "demcal.db", out, format = "text";
+    std::vector<std::string> targets, sigmas, jobs, where;
+    int refine = 0, workers = 0;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("--target", a->targets, "METRIC=VALUE (phi_peak, phi_cv, phi_diff, repose, or a stored metric); repeatable")
+      ->required();
+  cmd->add_option("--sigma", a->sigmas, "METRIC=SIGMA: the target's uncertainty (default: replica spread and surrogate error)");
+  cmd->add_option("--job", a->jobs, "job(s) to read (default: the job storing each metric); repeatable");
+  cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
+  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--refine", a->refine, "rounds of DEM runs around the answer, refitting after each")->check(CLI::Range(0, 20));
+  cmd->add_option("--workers", a->workers, "worker processes for --refine (default: the core count)")->check(CLI::Range(0, 4096));
+  cmd->add_option("--out", a->out, "HDF5 output directory for --refine (default: demcal-out next to the database)");
+  cmd->add_option("--format", a->format, "text or json")->capture_default_str();
+  cmd->callback([a, &exit_code] {
+    exit_code = guarded("", [&] {
+      if (a->format != "text" && a->format != "json")
+        throw jobs::JobError("--format", "expected text or json, got \"" + a->format + "\"");
+      calibrate::FitRequest req;
+      for (const auto& t : a->targets) req.targets.push_back(calibrate::parse_target(t));
+      for (const auto& s : a->sigmas) calibrate::apply_sigma(req.targets, s);
+      for (const auto& w : a->where) req.where.push_back(jobs::parse_where(w));
+      req.jobs = a->jobs;
+      require_db(a->db);
+      db::Store store(a->db);
+      calibrate::Calibration cal = calibrate::calibrate(store, req);
+      std::int64_t id = calibrate::store_fit(store, req, cal, 0);
+      std::vector<calibrate::RefineRound> rounds;
+      if (a->refine > 0 && cal.result.ok) {
+        calibrate::RefineOptions ro;
+        ro.rounds = a->refine;
+        ro.log = &std::cerr;
+        ro.run_points = calibrate::dem_point_runner(a->out.empty() ? default_out_dir(a->db) : a->out, a->workers, &std::cerr);
+        rounds = calibrate::refine(store, req, cal, ro);
+        if (!rounds.empty()) id = rounds.back().fit_id;
+      }
+      if (a->format == "json") {
+        auto row = store.fits().back();
+        nlohmann::json j = nlohmann::json::parse(row.result_json);
+        j["fit_id"] = id;
+        std::cout << j.dump(2) << "\n";
+      } else {
+        print_fit(std::cout, cal, id);
+        for (const auto& r : rounds)
+          std::cout << "refine round " << r.round << ": " << r.points.size() << " run(s); candidate theta = " << g(r.theta)
+                    << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 2) << "% of the range (fit " << r.fit_id << ")\n";
+      }
+      if (!cal.result.ok) {
+        std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";
+        return kRuntime;
+      }
+      return kOk;
+    });
+  });
+}
+
+}  // namespace demcal::cli

@@ -1,0 +1,114 @@
+// demcal map: a contour map of one metric over (theta, eta); demcal envelope:
+// Mohr-Coulomb friction angle and cohesion across confining pressures.
+#include "common.hpp"
+
+#include "calibrate/calibration.hpp"
+#include "calibrate/envelope.hpp"
+#include "calibrate/map.hpp"
+#include "db/store.hpp"
+#include "jobs/job_error.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+namespace demcal::cli {
+
+void add_map(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("map", "Contour map of a metric over (theta, eta), PNG or SVG");
+  struct Args {
+    std::string db = "demcal.db", job, metric, out;
+    std::vector<std::string> where;
+    bool no_fit = false;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("--metric", a->metric, "phi_peak, phi_cv, phi_diff, repose, or a stored metric")->required();
+  cmd->add_option("--job", a->job, "job to draw (default: the job storing the metric)");
+  cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
+  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)");
+  cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
+  cmd->callback([a, &exit_code] {
+    exit_code = guarded("", [&] {
+      std::vector<jobs::Where> where;
+      for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
+      const std::string out = a->out.empty() ? "map_" + a->metric + ".png" : a->out;
+      require_db(a->db);
+      db::Store store(a->db, /*read_only=*/true);
+      const std::vector<std::string> jobs = a->job.empty() ? std::vector<std::string>{} : std::vector<std::string>{a->job};
+      const std::string job = calibrate::job_for_metric(store, a->metric, jobs, where);
+      calibrate::GatherOptions go;
+      go.where = where;
+      const calibrate::ResponseSurface rs = calibrate::gather(store, job, a->metric, go);
+      calibrate::Surrogate s;
+      try {
+        s = calibrate::fit_surrogate(rs);
+      } catch (const std::invalid_argument& e) {
+        throw jobs::JobError("--job", "job \"" + job + "\", " + a->metric + ": " + e.what());
+      }
+      std::optional<calibrate::MapOverlay> overlay;
+      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job);
+      calibrate::MapRequest mr;
+      mr.out = out;
+      mr.overlay = overlay ? &*overlay : nullptr;
+      calibrate::draw_map(rs, s, mr);
+      std::cout << "wrote " << out << ": " << rs.label << " of job " << job << ", " << rs.with_data() << " point(s) with data, "
+                << rs.holes() << " hole(s)\n"
+                << "surrogate: " << s.describe() << "\n";
+      for (const auto& p : rs.points)
+        if (p.hole() && !p.refine)
+          std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.failed << " failed, " << p.unfinished
+                    << " not finished, " << p.missing << " without the metric)\n";
+      if (overlay) std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id << "\n";
+      return kOk;
+    });
+  });
+}
+
+void add_envelope(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("envelope", "Mohr-Coulomb friction angle and cohesion across confining pressures");
+  struct Args {
+    std::string db = "demcal.db", job;
+    std::vector<std::string> where;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("--job", a->job, "triaxial job spanning several confining_kpa (default: the only job)");
+  cmd->add_option("--where", a->where, "KEY=VALUE pinning another parameter; repeatable");
+  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->callback([a, &exit_code] {
+    exit_code = guarded("", [&] {
+      std::vector<jobs::Where> where;
+      for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
+      require_db(a->db);
+      db::Store store(a->db, /*read_only=*/true);
+      std::string job = a->job;
+      if (job.empty()) {
+        const auto all = calibrate::base_jobs(store);
+        if (all.size() != 1)
+          throw jobs::JobError("--job", all.empty() ? "no data: the database holds no jobs" : "the database holds several jobs; name one");
+        job = all.front();
+      }
+      const auto envs = calibrate::job_envelopes(store, job, where);
+      std::printf("%8s %8s %4s %5s  %18s  %18s  %18s\n", "theta", "eta", "n", "p", "phi (deg)", "c (kPa)", "phi, c=0 (deg)");
+      int fitted = 0;
+      for (const auto& e : envs) {
+        if (!e.note.empty()) {
+          std::printf("%8.4g %8.4g %4zu %5s  %s\n", e.theta, e.eta, e.sigma3_kpa.size(), "-", e.note.c_str());
+          continue;
+        }
+        ++fitted;
+        std::printf("%8.4g %8.4g %4d %5d  %8.3f +- %-6.2g  %8.3g +- %-6.2g  %8.3f +- %-6.2g\n", e.theta, e.eta, e.env.n, e.env.pressures,
+                    e.env.phi_deg, e.env.phi_se, e.env.c, e.env.c_se, e.env.phi0_deg, e.env.phi0_se);
+      }
+      std::cout << "sigma1 = N sigma3 + 2 c sqrt(N), N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak);"
+                   " +- one standard error\n";
+      if (fitted == 0) {
+        std::cerr << "demcal: error: --job: job \"" << job << "\" has no (theta, eta) with two or more confining pressures\n";
+        return kBadInput;
+      }
+      return kOk;
+    });
+  });
+}
+
+}  // namespace demcal::cli

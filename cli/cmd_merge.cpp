@@ -1,0 +1,49 @@
+#include "common.hpp"
+
+#include "db/merge.hpp"
+
+#include <iostream>
+#include <memory>
+
+namespace demcal::cli {
+namespace {
+
+struct MergeArgs {
+  std::vector<std::string> parts;
+  std::string into = "demcal.db";
+};
+
+int merge(const MergeArgs& a) {
+  const db::MergeReport r = db::merge_databases(a.into, a.parts);
+  std::cout << "merged " << r.parts << " database(s) into " << a.into << ": " << r.jobs_added << " job(s) added, "
+            << r.tasks_added << " task(s) added, " << r.results_taken << " result(s) taken, " << r.identical
+            << " identical already there, " << r.kept << " kept (the destination's finished result), "
+            << r.links_added << " job-task link(s) added, " << r.fits_added << " fit(s) added, "
+            << r.conflicts.size() << " conflict(s)\n";
+  for (const auto& c : r.conflicts) std::cerr << "demcal: conflict: " << c << "\n";
+  if (!r.conflicts.empty()) {
+    std::cerr << "demcal: " << r.conflicts.size()
+              << " conflict(s): the same task key with different results; the destination kept its own, "
+                 "everything else was merged\n";
+    return kRuntime;
+  }
+  return kOk;
+}
+
+}  // namespace
+
+void add_merge(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand(
+      "merge", "Join databases of sharded runs (demcal run --shard i/N) into one: one result per task key");
+  auto a = std::make_shared<MergeArgs>();
+  cmd->add_option("PARTS", a->parts, "databases to merge (e.g. part-*.db)")->required();
+  cmd->add_option("--into", a->into, "destination database (created if missing)")->capture_default_str();
+  cmd->footer(
+      "Identical results already in the destination are left alone, so merging a part twice changes nothing. "
+      "The same task key with different metrics is a conflict: reported, the destination keeps its result, exit "
+      "code 1. A part that is missing, not a demcal database or of another schema version stops the merge before "
+      "anything is written (exit code 2); the merge is one transaction.");
+  cmd->callback([a, &exit_code] { exit_code = guarded("", [&] { return merge(*a); }); });
+}
+
+}  // namespace demcal::cli

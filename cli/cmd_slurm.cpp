@@ -1,0 +1,135 @@
+#include "common.hpp"
+
+#include "jobs/job_error.hpp"
+#include "jobs/job_spec.hpp"
+#include "jobs/shard.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <regex>
+#include <sys/stat.h>
+
+namespace demcal::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct SlurmArgs {
+  std::string job, partition, time, out, db = "demcal.db", parts, demcal;
+  int array = 0, cpus = 1;
+};
+
+// 'text' for bash, whatever it holds.
+std::string quote(const std::string& text) {
+  std::string q = "'";
+  for (char c : text) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+void check_token(const std::string& option, const std::string& value, const char* pattern, const char* what) {
+  if (!value.empty() && !std::regex_match(value, std::regex(pattern)))
+    throw jobs::JobError(option, std::string("expected ") + what + ", got \"" + value + "\"");
+}
+
+std::string script(const SlurmArgs& a, const jobs::Job& job) {
+  const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : a.demcal;
+  const fs::path db = fs::absolute(a.db);
+  const fs::path workdir = db.parent_path();
+  const fs::path parts = a.parts.empty() ? workdir / "parts" : fs::absolute(a.parts);
+  const std::string n = std::to_string(a.array);
+  std::ostringstream s;
+  s << "#!/usr/bin/env bash\n"
+    << "# SLURM array job for demcal job \"" << job.name << "\": " << job.tasks.size() << " task(s) in " << n
+    << " shard(s), then a merge.\n"
+    << "# Written by `demcal slurm`. Submit both steps with:   bash " << (a.out.empty() ? "THIS_SCRIPT" : a.out) << "\n"
+    << "#   shard i (array element i, 1-based) runs the tasks whose index k has k mod " << n << " = i-1\n"
+    << "#   into its own database; the merge job starts when every shard succeeded\n"
+    << "#   (--dependency=afterok) and joins them with `demcal merge`.\n"
+    << "# Steps by hand (no SLURM): SLURM_ARRAY_TASK_ID=i bash THIS_SCRIPT shard, then bash THIS_SCRIPT merge.\n"
+    << "# A shard with a failed task exits 1 and holds the merge back; rerun it with\n"
+    << "#   sbatch --array=i THIS_SCRIPT shard --retry-failed   (or merge anyway: bash THIS_SCRIPT merge)\n"
+    << "#SBATCH --job-name=demcal-" << job.name << "\n";
+  if (!a.partition.empty()) s << "#SBATCH --partition=" << a.partition << "\n";
+  if (!a.time.empty()) s << "#SBATCH --time=" << a.time << "\n";
+  s << "#SBATCH --ntasks=1\n"
+    << "#SBATCH --cpus-per-task=" << a.cpus << "\n"
+    << "#SBATCH --output=" << (parts / "slurm-%x-%A_%a.out").string() << "\n"
+    << "set -euo pipefail\n"
+    << "DEMCAL=" << quote(demcal) << "\n"
+    << "JOB=" << quote(fs::absolute(a.job).string()) << "\n"
+    << "WORKDIR=" << quote(workdir.string()) << "\n"
+    << "PARTS=" << quote(parts.string()) << "\n"
+    << "DB=" << quote(db.string()) << "\n"
+    << "N=" << n << "\n"
+    << "SCRIPT=$(readlink -f \"$0\")\n"
+    << "cd \"$WORKDIR\"\n"
+    << "case \"${1:-submit}\" in\n"
+    << "  submit)\n"
+    << "    mkdir -p \"$PARTS\"\n"
+    << "    array_id=$(sbatch --parsable --array=1-\"$N\" \"$SCRIPT\" shard)\n"
+    << "    array_id=${array_id%%;*}  # --parsable prints id[;cluster]\n"
+    << "    merge_id=$(sbatch --parsable --dependency=afterok:\"$array_id\" --cpus-per-task=1 \"$SCRIPT\" merge)\n"
+    << "    echo \"submitted the shards as job $array_id (array 1-$N) and the merge as job ${merge_id%%;*}\"\n"
+    << "    ;;\n"
+    << "  shard)\n"
+    << "    shift  # anything after \"shard\" goes to demcal run, e.g. --retry-failed\n"
+    << "    ID=${SLURM_ARRAY_TASK_ID:?the shard step runs inside a SLURM array job (SLURM_ARRAY_TASK_ID)}\n"
+    << "    mkdir -p \"$PARTS\"\n"
+    << "    exec \"$DEMCAL\" run \"$JOB\" --shard \"$((ID))/$N\" --db \"$PARTS/part-$ID.db\" --out \"$WORKDIR/demcal-out\" "
+       "--workers \"${SLURM_CPUS_PER_TASK:-"
+    << a.cpus << "}\" --format csv \"$@\"\n"
+    << "    ;;\n"
+    << "  merge)\n"
+    << "    parts=()\n"
+    << "    for ((i = 1; i <= N; i++)); do parts+=(\"$PARTS/part-$i.db\"); done\n"
+    << "    exec \"$DEMCAL\" merge \"${parts[@]}\" --into \"$DB\"\n"
+    << "    ;;\n"
+    << "  *)\n"
+    << "    echo \"usage: $0 [submit|shard|merge]\" >&2\n"
+    << "    exit 2\n"
+    << "    ;;\n"
+    << "esac\n";
+  return s.str();
+}
+
+int slurm(SlurmArgs a) {
+  check_token("--partition", a.partition, "[A-Za-z0-9_.,-]{1,200}", "a partition name (letters, digits, _ . , -)");
+  check_token("--time", a.time, "[0-9]{1,6}(-[0-9]{1,2})?(:[0-9]{1,2}){0,2}", "a SLURM time limit such as 30, 4:00:00 or 1-12:00:00");
+  const jobs::Job job = jobs::load_job_file(a.job);  // the job must be valid before anything is written
+  if (a.out.empty()) a.out = "demcal-" + job.name + ".slurm.sh";
+  const std::string text = script(a, job);
+  {
+    std::ofstream f(a.out, std::ios::trunc);
+    f << text;
+    if (!f) throw std::runtime_error("cannot write " + a.out);
+  }
+  ::chmod(a.out.c_str(), 0755);
+  std::cout << "wrote " << a.out << ": " << job.tasks.size() << " task(s) of job " << job.name << " in " << a.array
+            << " shard(s) plus a merge into " << fs::absolute(a.db).string() << "\nsubmit with: bash " << a.out << "\n";
+  return kOk;
+}
+
+}  // namespace
+
+void add_slurm(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("slurm", "Write a SLURM array batch script: one shard per array element, then a merge");
+  auto a = std::make_shared<SlurmArgs>();
+  cmd->add_option("JOB", a->job, "job file (JSON)")->required();
+  cmd->add_option("--array", a->array, "number of shards (array elements 1..N)")
+      ->required()
+      ->check(CLI::Range(1, jobs::kMaxShards));
+  cmd->add_option("--partition", a->partition, "SLURM partition");
+  cmd->add_option("--time", a->time, "time limit per shard (SLURM format, e.g. 4:00:00)");
+  cmd->add_option("--cpus-per-task", a->cpus, "cores per shard (its local --workers)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
+  cmd->add_option("--db", a->db, "the merged database")->capture_default_str();
+  cmd->add_option("--parts", a->parts, "folder for the shards' databases and logs (default: parts/ next to --db)");
+  cmd->add_option("--demcal", a->demcal, "demcal executable on the cluster (default: this one)");
+  cmd->add_option("--out", a->out, "script to write (default: demcal-<job>.slurm.sh)");
+  cmd->callback([a, &exit_code] { exit_code = guarded(a->job, [&] { return slurm(*a); }); });
+}
+
+}  // namespace demcal::cli

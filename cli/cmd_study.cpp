@@ -1,0 +1,158 @@
+// demcal study timestep|grazing|fidelity|repose-fidelity: speed-against-accuracy studies (issue 9).
+#include "common.hpp"
+
+#include "db/store.hpp"
+#include "jobs/job_error.hpp"
+#include "jobs/study.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <stdexcept>
+#include <iostream>
+#include <memory>
+#include <unistd.h>
+
+namespace demcal::cli {
+namespace {
+
+struct StudyArgs {
+  std::string name, db = "demcal.db", out;
+  bool quick = false;
+  int workers = 0;
+  double tolerance = 0.0;
+  int replicas = 0;
+  std::vector<std::string> knobs, references;
+};
+
+bool is_fidelity(const std::string& name) { return name == "fidelity" || name == "repose-fidelity"; }
+
+// "particles=2000" -> {particles, 2000}
+std::pair<std::string, double> parse_reference(const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
+    throw jobs::JobError("--reference", "expected KNOB=VALUE (e.g. particles=2000), got \"" + text + "\"");
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(text.substr(eq + 1), &used);
+    if (used != text.size() - eq - 1) throw std::invalid_argument("trailing");
+    return {text.substr(0, eq), v};
+  } catch (const std::logic_error&) {
+    throw jobs::JobError("--reference", "not a number in \"" + text + "\"");
+  }
+}
+
+int fidelity(const StudyArgs& a, jobs::StudyOptions o) {
+  for (const auto& r : a.references) o.reference.insert(parse_reference(r));
+  jobs::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
+  db::Store store(a.db);
+  const jobs::FidelityStudy s = jobs::run_fidelity_study(store, a.name, o);
+  std::cout << "study " << s.name << " (" << s.scene << "), baseline " << s.baseline << "; " << s.replicas
+            << " replica(s) per setting\n";
+  for (const auto& f : s.job_files) std::cout << "job file " << f << "\n";
+  std::cout << s.tasks << " tasks in " << a.db << " (" << s.reused << " reused, " << s.ran << " run now)\n";
+  for (const auto& k : s.knobs) {
+    std::cout << "\n" << k.name << " (" << k.param << "):\n";
+    std::string head = "  setting        ok/n   wall_s  Mpart-steps";
+    for (const auto& m : s.metrics) head += "  " + std::string(m.size() < 14 ? 14 - m.size() : 0, ' ') + m + " (err +/- sd)";
+    std::cout << head << "\n";
+    for (const auto& p : k.points) {
+      char line[160];
+      std::snprintf(line, sizeof line, "  %-12s  %2d/%-2d  %7.3g  %11.4g", (p.label + (p.reference ? "*" : "")).c_str(),
+                    p.replicas - p.failed, p.replicas, p.wall_s, p.work / 1e6);
+      std::cout << line;
+      for (std::size_t m = 0; m < s.metrics.size(); ++m) {
+        std::snprintf(line, sizeof line, "  %7.2f (%5.2f +/- %4.2f)", p.mean[m], p.error[m], p.sd[m]);
+        std::cout << line;
+      }
+      std::cout << (p.pareto ? "  pareto" : "") << (p.recommended ? "  recommended" : "")
+                << (p.failed > 0 ? "  FAILED " + std::to_string(p.failed) : "") << "\n";
+    }
+    std::cout << "  " << k.recommendation << "\n";
+  }
+  std::cout << "(* the reference setting; error = |mean - reference mean|, sd over replicas; cost for \"cheapest\" "
+               "and the Pareto front: particle-steps, mean over replicas)\n";
+  if (!s.failures.empty()) {
+    std::cout << "failed tasks (" << s.failures.size() << "):\n";
+    for (const auto& f : s.failures) std::cout << "  " << f << "\n";
+  }
+  std::cout << s.recommendation << "\n";
+  for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+  return kOk;
+}
+
+int study(const StudyArgs& a) {
+  const auto& names = jobs::study_names();
+  if (std::find(names.begin(), names.end(), a.name) == names.end()) {
+    std::string all;
+    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
+    throw jobs::JobError("study", "unknown study \"" + a.name + "\" (expected one of: " + all + ")");
+  }
+  jobs::StudyOptions o;
+  o.out_dir = a.out.empty() ? default_out_dir(a.db) + "/study-" + a.name : a.out;
+  o.quick = a.quick;
+  o.workers = a.workers;
+  o.tolerance = a.tolerance;
+  o.replicas = a.replicas;
+  o.knobs = a.knobs;
+  o.terminal = isatty(STDERR_FILENO) != 0;
+  o.log = &std::cerr;
+  if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
+    throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  if (is_fidelity(a.name)) return fidelity(a, o);
+  if (a.name == "grazing") {
+    const jobs::GrazingStudy s = jobs::run_grazing_study(o);
+    std::cout << "grazing impact, theta 30 deg, eta 0.1, b 1, no damping: " << s.rows.size() << " impacts\n"
+              << "largest energy ratio - 1: " << s.worst_gain << " (" << s.worst_where << ")"
+              << (s.worst_gain > 0 ? ": the integrator's head-on error, see docs/studies.md" : ": no energy gained")
+              << "\n";
+    for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+    return kOk;
+  }
+  db::Store store(a.db);
+  const jobs::TimestepStudy s = jobs::run_timestep_study(store, o);
+  std::cout << "job " << s.job << " in " << a.db << ": " << s.tasks << " tasks (" << s.reused << " reused, " << s.ran
+            << " run now)\n";
+  std::cout << "series           dt_factor  status    drift/sim-s    wall-s/sim-s  pareto\n";
+  for (const auto& p : s.points) {
+    char line[200];
+    std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12.3e  %12.3e  %s\n",
+                  p.friction ? "friction+rolling" : "frictionless", p.dt_factor, p.ok ? "ok" : "unstable",
+                  p.ok ? p.drift : 0.0, p.ok ? p.cost : 0.0, p.pareto ? "*" : "");
+    std::cout << line;
+  }
+  std::cout << s.recommendation << "\n";
+  for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+  return kOk;
+}
+
+}  // namespace
+
+void add_study(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand(
+      "study", "Speed-against-accuracy studies: timestep (seed Fig. 2.6 over dt factors, stored in the database), "
+               "grazing (oblique impacts: energy must never be gained), fidelity (triaxial) and repose-fidelity "
+               "(error against wall time, one knob at a time); charts with gnuplot");
+  auto a = std::make_shared<StudyArgs>();
+  cmd->add_option("NAME", a->name, "timestep, grazing, fidelity or repose-fidelity")->required();
+  cmd->add_option("--db", a->db, "SQLite database (timestep, fidelity, repose-fidelity)")->capture_default_str();
+  cmd->add_option("--out", a->out, "where charts and CSV go (default: demcal-out/study-NAME next to the database)");
+  cmd->add_flag("--quick", a->quick, "a small, fast version (seconds): for tests and a first look");
+  cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->check(CLI::Range(1, 4096));
+  cmd->add_option("--tolerance", a->tolerance,
+                  "timestep: accepted |relative energy drift| per simulated second (default 0.1); "
+                  "fidelity, repose-fidelity: accepted error + replica sd in degrees (default 2)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--replicas", a->replicas, "fidelity studies: packings (seeds 1..R) per setting (default 3, --quick 1)")
+      ->check(CLI::Range(1, 1000));
+  cmd->add_option("--knobs", a->knobs,
+                  "fidelity studies: knobs to vary, comma-separated (fidelity: particles, rate, dt, density; "
+                  "repose-fidelity: depth, column, stiffness, dt; default all)")
+      ->delimiter(',');
+  cmd->add_option("--reference", a->references,
+                  "fidelity studies: KNOB=VALUE, the setting errors are measured against (default: the knob's most "
+                  "expensive setting); a value not in the knob's list is added to it")
+      ->delimiter(',');
+  cmd->callback([a, &exit_code] { exit_code = guarded("", [&] { return study(*a); }); });
+}
+
+}  // namespace demcal::cli

@@ -1,0 +1,393 @@
+#include "mpi_runner.hpp"
+
+#include "liveness.hpp"
+#include "progress.hpp"
+#include "worker.hpp"
+
+#include <mpi.h>
+
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <cstdlib>
+#include <deque>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+#include <unistd.h>
+
+namespace demcal::jobs::mpi {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Worker -> rank 0
+constexpr int kTagReady = 1;      // empty: give me work
+constexpr int kTagHeartbeat = 2;  // empty: still running my task
+constexpr int kTagResult = 3;     // "<task id>\n<result JSON text>"
+// Rank 0 -> worker
+constexpr int kTagTask = 10;  // the task as JSON
+constexpr int kTagStop = 11;  // empty: leave
+
+bool g_dismissed = false;  // rank 0 told every worker to stop
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void on_mpi_stop_signal(int sig) { g_stop = sig; }
+
+class SignalGuard {
+ public:
+  SignalGuard() {
+    g_stop = 0;
+    struct sigaction sa {};
+    sa.sa_handler = on_mpi_stop_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &old_int_);
+    sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~SignalGuard() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
+
+void check(int rc, const char* what) {
+  if (rc == MPI_SUCCESS) return;
+  char msg[MPI_MAX_ERROR_STRING] = {};
+  int len = 0;
+  MPI_Error_string(rc, msg, &len);
+  throw std::runtime_error(std::string("MPI ") + what + " failed: " + msg);
+}
+
+void send(int dest, int tag, const std::string& text) {
+  check(MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, dest, tag, MPI_COMM_WORLD), "send");
+}
+
+// The message Iprobe found, received whole.
+std::string receive(const MPI_Status& probed) {
+  int n = 0;
+  MPI_Status st = probed;
+  check(MPI_Get_count(&st, MPI_CHAR, &n), "get_count");
+  std::string text(static_cast<std::size_t>(std::max(0, n)), '\0');
+  check(MPI_Recv(text.data(), n, MPI_CHAR, probed.MPI_SOURCE, probed.MPI_TAG, MPI_COMM_WORLD, MPI_STATUS_IGNORE),
+        "recv");
+  return text;
+}
+
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+double heartbeat_interval(const MpiOptions& o) { return std::clamp(o.timeout_s / 5, 0.05, 5.0); }
+
+// Test-only hook: a worker rank that receives the task with this expansion index
+// kills itself (SIGKILL), to test that rank 0 survives losing a rank.
+void test_kill_rank_hook(std::size_t index) {
+  const char* env = std::getenv("DEMCAL_TEST_KILL_RANK_TASK");
+  if (env && *env && std::to_string(index) == env) raise(SIGKILL);
+}
+
+std::string format_s(double s) {
+  std::ostringstream o;
+  o << s;
+  return o.str();
+}
+
+}  // namespace
+
+Session::Session() {
+  int inited = 0;
+  MPI_Initialized(&inited);
+  if (!inited) check(MPI_Init(nullptr, nullptr), "init");
+  // Errors come back as return codes: a lost peer must not abort rank 0.
+  MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
+  MPI_Comm_size(MPI_COMM_WORLD, &size_);
+}
+
+Session::~Session() {
+  if (rank_ == 0 && !g_dismissed) {
+    // Rank 0 failed before or during the farm (bad job, unusable database): the
+    // workers are waiting for work; tell them to leave.
+    for (int r = 1; r < size_; ++r) MPI_Send(nullptr, 0, MPI_CHAR, r, kTagStop, MPI_COMM_WORLD);
+    g_dismissed = true;
+  }
+  std::cout.flush();
+  std::cerr.flush();
+  MPI_Finalize();
+}
+
+int serve(const MpiOptions& options) {
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  const double hb = heartbeat_interval(options);
+  const std::string who = "demcal: rank " + std::to_string(rank) + ": ";
+  try {
+    send(0, kTagReady, "");
+    // Rank 0 answers every READY or RESULT at once (a task or STOP), except at the
+    // start while it records the job; silence far beyond that means it is gone.
+    double limit = std::max(600.0, 10 * options.timeout_s);
+    for (;;) {
+      const auto wait_start = Clock::now();
+      MPI_Status st{};
+      int flag = 0;
+      while (!flag) {
+        check(MPI_Iprobe(0, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &st), "iprobe");
+        if (flag) break;
+        if (seconds(Clock::now() - wait_start) > limit) {
+          std::cerr << who << "no word from rank 0 for " << limit << " s; leaving\n";
+          return 1;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      }
+      const std::string text = receive(st);
+      if (st.MPI_TAG == kTagStop) return 0;
+      if (st.MPI_TAG != kTagTask) continue;
+      const nlohmann::json j = nlohmann::json::parse(text);
+      WorkerTask t;
+      t.task_id = j.at("task_id").get<std::int64_t>();
+      t.index = j.at("index").get<std::size_t>();
+      t.scene = j.at("scene").get<std::string>();
+      t.params = j.at("params");
+      t.threads = j.at("threads").get<int>();
+      t.snapshots = j.at("snapshots").get<bool>();
+      t.h5_path = j.at("h5_path").get<std::string>();
+      t.result_path = (std::filesystem::temp_directory_path() /
+                       ("demcal-rank" + std::to_string(rank) + "-" + std::to_string(getpid()) + "-task" +
+                        std::to_string(t.task_id) + ".result.json"))
+                          .string();
+      test_kill_rank_hook(t.index);
+      const std::string beat = std::to_string(t.task_id);
+      const std::string result = run_forked(t, hb, [&] { send(0, kTagHeartbeat, beat); });
+      send(0, kTagResult, std::to_string(t.task_id) + "\n" + result);
+      limit = std::max(60.0, 10 * options.timeout_s);
+    }
+  } catch (const std::exception& e) {
+    std::cerr << who << e.what() << "\n";
+    return 1;
+  }
+}
+
+RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi) {
+  std::ostream& log = options.log ? *options.log : std::cerr;
+  int size = 1;
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  if (size < 2)
+    throw std::runtime_error(
+        "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
+  SignalGuard guard;
+  const std::string token = runner_token();
+  const std::int64_t job_id =
+      store.put_job(job.name, job.spec.dump(), tasks_to_record(job, options.shard), options.shard.active());
+  if (int n = store.requeue_dead(runner_alive))
+    log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
+  if (options.retry_failed)
+    if (int n = store.reset_failed(job_id)) log << "retrying " << n << " failed task(s)\n";
+  const std::filesystem::path dir = task_output_dir(job, options);
+  std::filesystem::create_directories(dir);
+  std::deque<db::TaskRow> queue;
+  for (auto& row : store.tasks(job.name))
+    if (row.status == "pending" && options.shard.contains(static_cast<std::size_t>(row.index)))
+      queue.push_back(std::move(row));
+  const int threads = job.threads > 0 ? job.threads : 1;
+
+  Progress progress(log, options.terminal);
+  auto counts = [&] {
+    Counts c;
+    for (const auto& [name, by_status] : store.counts(job.name))
+      for (const auto& [status, n] : by_status) {
+        c.total += n;
+        if (status == "done") c.done += n;
+        if (status == "failed") c.failed += n;
+        if (status == "running") c.running += n;
+      }
+    return c;
+  };
+  RunSummary s;
+  // counts() reads the whole job (~13 ms for 10,000 tasks): once here, then kept
+  // up to date by hand, so rank 0's time per task does not grow with the grid.
+  const Counts start = counts();
+  Counts live = start;
+  s.reused = start.done;
+  if (start.done > 0) log << start.done << " of " << start.total << " task(s) already done, reused\n";
+  log << "MPI task farm: " << size - 1 << " worker rank(s), " << queue.size() << " task(s) to run, lost-rank timeout "
+      << mpi.timeout_s << " s\n";
+
+  struct Rank {
+    bool ready = false, stopped = false, lost = false, started = false;
+    std::optional<db::TaskRow> task;
+    Clock::time_point last_seen, task_start;
+  };
+  const auto t0 = Clock::now();
+  std::vector<Rank> ranks(static_cast<std::size_t>(size));
+  for (auto& r : ranks) r.last_seen = t0;
+  int ran = 0;
+  auto fail_task = [&](int r, const std::string& why) {
+    Rank& k = ranks[static_cast<std::size_t>(r)];
+    db::Outcome out;
+    out.status = "failed";
+    out.wall_s = seconds(Clock::now() - k.task_start);
+    out.error = why;
+    if (store.finish(k.task->id, token, out)) {
+      --live.running;
+      ++live.failed;
+    }
+    ++ran;
+    progress.line(describe_task(job, static_cast<std::size_t>(k.task->index)) + " failed: " + why, live);
+    k.task.reset();
+  };
+  auto stop_rank = [&](int r) {
+    Rank& k = ranks[static_cast<std::size_t>(r)];
+    if (k.stopped || k.lost) return;
+    send(r, kTagStop, "");
+    k.stopped = true;
+    k.ready = false;
+  };
+
+  for (;;) {
+    if (g_stop) break;
+    bool got = false;
+    for (;;) {  // drain what has arrived
+      MPI_Status st{};
+      int flag = 0;
+      check(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &st), "iprobe");
+      if (!flag) break;
+      got = true;
+      const std::string text = receive(st);
+      const int r = st.MPI_SOURCE;
+      if (r <= 0 || r >= size) continue;
+      Rank& k = ranks[static_cast<std::size_t>(r)];
+      k.last_seen = Clock::now();
+      k.started = true;
+      if (k.lost) {
+        // Declared lost but alive after all (slower than the timeout): its task is
+        // already failed; send it away so it does not wait for work.
+        if (st.MPI_TAG == kTagResult || st.MPI_TAG == kTagReady) {
+          if (st.MPI_TAG == kTagResult) log << "late result from rank " << r << " (declared lost) ignored\n";
+          if (!k.stopped) send(r, kTagStop, "");
+          k.stopped = true;
+        }
+        continue;
+      }
+      if (st.MPI_TAG == kTagReady) {
+        k.ready = true;
+      } else if (st.MPI_TAG == kTagResult) {
+        const auto nl = text.find('\n');
+        const std::int64_t id = nl == std::string::npos ? -1 : std::stoll(text.substr(0, nl));
+        if (!k.task || k.task->id != id) {
+          log << "unexpected result for task id " << id << " from rank " << r << " ignored\n";
+          k.ready = true;
+          continue;
+        }
+        std::optional<db::Outcome> out = parse_worker_result(text.substr(nl + 1));
+        if (!out) {
+          fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
+        } else {
+          if (store.finish(k.task->id, token, *out)) {
+            --live.running;
+            ++(out->status == "done" ? live.done : live.failed);
+          }
+          ++ran;
+          std::ostringstream msg;
+          msg << describe_task(job, static_cast<std::size_t>(k.task->index)) << " " << out->status << " in "
+              << format_duration(out->wall_s) << " on rank " << r;
+          if (!out->error.empty()) msg << ": " << out->error;
+          progress.line(msg.str(), live);
+          k.task.reset();
+        }
+        k.ready = true;
+      }
+    }
+    // Hand out work; with none left, idle ranks leave at once (a lost rank's task is
+    // failed, not re-queued, so no work appears later).
+    for (int r = 1; r < size; ++r) {
+      Rank& k = ranks[static_cast<std::size_t>(r)];
+      if (!k.ready || k.lost || k.stopped) continue;
+      while (!queue.empty() && !k.task) {
+        db::TaskRow row = queue.front();
+        queue.pop_front();
+        if (!store.claim(row.id, token)) continue;  // another runner took it
+        ++live.running;
+        nlohmann::json t = {{"task_id", row.id},
+                            {"index", row.index},
+                            {"scene", row.scene},
+                            {"params", nlohmann::json::parse(row.params_json)},
+                            {"threads", threads},
+                            {"snapshots", job.snapshots},
+                            {"h5_path", (dir / (std::to_string(row.id) + ".h5")).string()}};
+        send(r, kTagTask, t.dump());
+        k.task = std::move(row);
+        k.task_start = k.last_seen = Clock::now();
+        k.ready = false;
+        progress.line(describe_task(job, static_cast<std::size_t>(k.task->index)) + " started on rank " +
+                          std::to_string(r) + " (task id " + std::to_string(k.task->id) + ")",
+                      live);
+      }
+      if (!k.task && queue.empty()) stop_rank(r);
+    }
+    // Lost ranks: silent beyond the timeout while holding a task, or never started.
+    const auto now = Clock::now();
+    for (int r = 1; r < size; ++r) {
+      Rank& k = ranks[static_cast<std::size_t>(r)];
+      if (k.lost || k.stopped) continue;
+      const double silent = seconds(now - k.last_seen);
+      if (k.task && silent > mpi.timeout_s) {
+        k.lost = true;
+        log << "worker rank " << r << " lost: no message for " << format_s(mpi.timeout_s) << " s\n";
+        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + format_s(mpi.timeout_s) +
+                         " s); rerun with --retry-failed");
+      } else if (!k.started && silent > std::max(600.0, 10 * mpi.timeout_s)) {
+        k.lost = true;
+        log << "worker rank " << r << " never reported; not used\n";
+      }
+    }
+    bool busy = false, serving = false;
+    for (int r = 1; r < size; ++r) {
+      const Rank& k = ranks[static_cast<std::size_t>(r)];
+      busy = busy || k.task.has_value();
+      serving = serving || (!k.lost && !k.stopped);
+    }
+    if (!busy && !serving) break;  // every rank stopped or lost
+    progress.update(live, -1);
+    if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+
+  if (g_stop) {
+    // Plain mpirun ends the whole job with SIGTERM when any rank dies (see
+    // docs/scaling.md): what was running goes back to pending for the next run.
+    log << "\n" << (g_stop == SIGINT ? "interrupted" : "terminated (SIGTERM: mpirun ends the job this way when a rank dies)")
+        << ": running task(s) go back to the queue\n";
+    for (int r = 1; r < size; ++r) {
+      Rank& k = ranks[static_cast<std::size_t>(r)];
+      if (k.task) {
+        store.release(k.task->id, token, "interrupted; will be retried");
+        --live.running;
+      }
+      k.task.reset();
+    }
+    s.interrupted = true;
+  }
+  for (int r = 1; r < size; ++r) {
+    try {
+      stop_rank(r);
+    } catch (const std::exception&) {
+      // a rank that is gone: nothing to tell
+    }
+  }
+  g_dismissed = true;
+  if (!queue.empty() && !s.interrupted)
+    log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
+  progress.finish();
+  const Counts c = counts();
+  s.total = c.total;
+  s.done = c.done;
+  s.failed = c.failed;
+  s.unfinished = c.total - c.done - c.failed;
+  s.ran = ran;
+  return s;
+}
+
+}  // namespace demcal::jobs::mpi

@@ -1,0 +1,160 @@
+// The angle-of-repose scene (seed Sec. 2.2.4): column collapse on a rough floor.
+#include "../job_error.hpp"
+#include "../material_params.hpp"
+#include "../scene_registry.hpp"
+
+#include "engine/errors.hpp"
+#include "engine/scenes/repose.hpp"
+
+#include <algorithm>
+
+namespace demcal::jobs {
+namespace {
+
+const char* const kSection = "repose";
+
+std::vector<ParamSpec> repose_params() {
+  std::vector<ParamSpec> p = material_params();
+  const engine::ReposeConfig d;
+  // The grain count follows from the column (width x height x depth); the column,
+  // slab depth, stiffness scale and time limit default by fidelity in resolve().
+  p.push_back(real_param(kSection, "column_width", "column_width", nullptr).above(0).at_most(10));
+  p.push_back(real_param(kSection, "column_height", "column_height", nullptr).above(0).at_most(10));
+  p.push_back(real_param(kSection, "depth_diameters", "depth_diameters", nullptr).above(0).at_most(1000));
+  p.push_back(real_param(kSection, "domain_length", "domain_length", d.domain_length).at_least(0).at_most(100));
+  p.push_back(real_param(kSection, "floor_spacing", "floor_spacing", d.floor_spacing).at_least(0).at_most(1));
+  // Preparation
+  p.push_back(real_param(kSection, "fill_solid_fraction", "fill_solid_fraction", d.fill_solid_fraction)
+                  .above(0).at_most(0.38));
+  p.push_back(real_param(kSection, "target_solid_fraction", "target_solid_fraction", d.target_solid_fraction)
+                  .above(0.3).below(0.74));
+  p.push_back(real_param(kSection, "overfill", "overfill", d.overfill).at_least(1).at_most(2));
+  p.push_back(real_param(kSection, "prep_damping", "prep_damping", d.prep_damping).at_least(0).below(1));
+  p.push_back(real_param(kSection, "settle_ke_ratio", "settle_ke_ratio", d.settle_ke_ratio).above(0).at_most(1));
+  p.push_back(real_param(kSection, "settle_time_limit", "settle_time_limit", d.settle_time_limit).above(0).at_most(1000));
+  // Collapse
+  p.push_back(real_param(kSection, "rest_ke_ratio", "rest_ke_ratio", d.rest_ke_ratio).above(0).at_most(1));
+  p.push_back(real_param(kSection, "rest_trim", "rest_trim", d.rest_trim).at_least(0).at_most(0.1));
+  p.push_back(int_param(kSection, "rest_samples", "rest_samples", static_cast<std::int64_t>(d.rest_samples))
+                  .at_least(1).at_most(10000));
+  p.push_back(real_param(kSection, "collapse_drag", "collapse_drag", d.collapse_drag).at_least(0).at_most(1e4));
+  p.push_back(real_param(kSection, "min_collapse_time", "min_collapse_time", d.min_collapse_time).at_least(0).at_most(1000));
+  p.push_back(real_param(kSection, "time_limit", "time_limit", nullptr).above(0).at_most(1000));
+  p.push_back(real_param(kSection, "sample_interval", "sample_interval", d.sample_interval).above(0).at_most(10));
+  // Numerics: dt or dt_factor (resolve() rejects both).
+  p.push_back(real_param(kSection, "stiffness_scale", "stiffness_scale", nullptr).above(0).at_most(1));
+  p.push_back(real_param(kSection, "dt", "dt", nullptr).above(0).below(1));
+  p.push_back(real_param(kSection, "dt_factor", "dt_factor", nullptr).above(0).at_most(10));
+  p.push_back(real_param(kSection, "gravity", "gravity", d.gravity).above(0).at_most(1e4));
+  p.push_back(real_param(kSection, "energy_guard", "energy_guard", d.energy_guard).at_most(1e6));  // < 0: off
+  // Measurement
+  p.push_back(real_param(kSection, "bin_width", "bin_width", d.bin_width).at_least(0).at_most(1));
+  p.push_back(real_param(kSection, "fit_lo", "fit_lo", d.fit_lo).at_least(0).below(1));
+  p.push_back(real_param(kSection, "fit_hi", "fit_hi", d.fit_hi).above(0).at_most(1));
+  p.push_back(real_param(kSection, "steep_window", "steep_window", d.steep_window).at_least(0).at_most(1));
+  p.push_back(real_param(kSection, "front_min_height", "front_min_height", d.front_min_height).above(0).at_most(100));
+  p.push_back(real_param(kSection, "front_max_gap", "front_max_gap", d.front_max_gap).at_least(0).at_most(1000));
+  return p;
+}
+
+engine::ReposeConfig config_from(const nlohmann::json& p) {
+  engine::ReposeConfig c;
+  c.material = material_from(p);
+  c.column_width = p.at("column_width").get<double>();
+  c.column_height = p.at("column_height").get<double>();
+  c.slab_depth_diameters = p.at("depth_diameters").get<double>();
+  c.domain_length = p.at("domain_length").get<double>();
+  c.floor_spacing = p.at("floor_spacing").get<double>();
+  c.fill_solid_fraction = p.at("fill_solid_fraction").get<double>();
+  c.target_solid_fraction = p.at("target_solid_fraction").get<double>();
+  c.overfill = p.at("overfill").get<double>();
+  c.prep_damping = p.at("prep_damping").get<double>();
+  c.settle_ke_ratio = p.at("settle_ke_ratio").get<double>();
+  c.settle_time_limit = p.at("settle_time_limit").get<double>();
+  c.rest_ke_ratio = p.at("rest_ke_ratio").get<double>();
+  c.rest_trim = p.at("rest_trim").get<double>();
+  c.rest_samples = p.at("rest_samples").get<int>();
+  c.collapse_drag = p.at("collapse_drag").get<double>();
+  c.min_collapse_time = p.at("min_collapse_time").get<double>();
+  c.time_limit = p.at("time_limit").get<double>();
+  c.sample_interval = p.at("sample_interval").get<double>();
+  c.stiffness_scale = p.at("stiffness_scale").get<double>();
+  c.dt = p.value("dt", 0.0);
+  if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
+  c.gravity = p.at("gravity").get<double>();
+  c.energy_guard = p.at("energy_guard").get<double>();
+  c.bin_width = p.at("bin_width").get<double>();
+  c.fit_lo = p.at("fit_lo").get<double>();
+  c.fit_hi = p.at("fit_hi").get<double>();
+  c.steep_window = p.at("steep_window").get<double>();
+  c.front_min_height = p.at("front_min_height").get<double>();
+  c.front_max_gap = p.at("front_max_gap").get<double>();
+  c.seed = p.at("seed").get<std::uint64_t>();
+  return c;
+}
+
+// Column, slab depth, stiffness scale and time limit per fidelity, when the job
+// gives none. Provisional until the fidelity study fixes them (design section 9).
+// quick: a 15 mm column of ~300 grains at 1e-3 stiffness (under a minute on one
+// core); standard: the seed's 50 mm column at 1e-3 stiffness (docs/validation.md,
+// ~5 min); reference: the seed's column at 1e-2 stiffness.
+struct Preset {
+  double column_width, column_height, depth_diameters, stiffness_scale, time_limit;
+};
+Preset preset(const std::string& fidelity) {
+  if (fidelity == "quick") return {0.015, 0.015, 3.0, 1e-3, 1.5};
+  if (fidelity == "reference") return {0.05, 0.05, 4.0, 1e-2, 3.0};
+  return {0.05, 0.05, 4.0, 1e-3, 2.0};
+}
+
+// Engine field names the job file spells differently.
+std::string job_path(const std::string& field) {
+  if (field == "repose.slab_depth_diameters") return "repose.depth_diameters";
+  if (field == "repose.fit_fractions") return "repose.fit_hi";
+  return job_path_of(field, kSection);
+}
+
+std::string num(const nlohmann::json& v) { return v.dump(); }
+
+void resolve(nlohmann::json& p, const std::string& fidelity) {
+  if (p.contains("dt") && p.contains("dt_factor"))
+    throw JobError("repose.dt", "give dt or dt_factor, not both");
+  if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", engine::ReposeConfig{}.dt_factor));
+  const Preset pre = preset(fidelity);
+  if (!p.contains("column_width")) p["column_width"] = pre.column_width;
+  if (!p.contains("column_height")) p["column_height"] = pre.column_height;
+  if (!p.contains("depth_diameters")) p["depth_diameters"] = pre.depth_diameters;
+  if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;
+  if (!p.contains("time_limit")) p["time_limit"] = pre.time_limit;
+  if (p["d_min"].get<double>() > p["d_max"].get<double>())
+    throw JobError("material.diameter", "min (" + num(p["d_min"]) + ") must not exceed max (" + num(p["d_max"]) + ")");
+  if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>()))
+    throw JobError("repose.fit_hi", "must exceed repose.fit_lo (" + num(p["fit_lo"]) + "), got " + num(p["fit_hi"]));
+  if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>())
+    throw JobError("repose.min_collapse_time", "must be below repose.time_limit (" + num(p["time_limit"]) + ")");
+  try {
+    config_from(p).validate();
+  } catch (const engine::ConfigError& e) {
+    std::string reason = e.what();
+    reason = reason.substr(std::min(reason.size(), e.field().size() + 2));
+    throw JobError(job_path(e.field()), reason);
+  }
+}
+
+SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
+  engine::ReposeConfig c = config_from(p);
+  c.threads = ctx.threads;
+  engine::ReposeResult r = engine::run_repose(c, ctx.observer);
+  SceneOutput out;
+  out.outcome = r.outcome;
+  if (r.outcome.ok()) out.metrics = r.metrics();
+  for (engine::Series* s : {&r.profile, &r.energy, &r.prep})
+    if (!s->name.empty()) out.series.push_back(std::move(*s));
+  return out;
+}
+
+}  // namespace
+
+SceneDef scene_repose() { return SceneDef{kSection, repose_params(), resolve, run}; }
+
+}  // namespace demcal::jobs

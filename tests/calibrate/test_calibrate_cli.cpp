@@ -1,0 +1,301 @@
+// The calibration through the store and the demcal binary: maps with holes, fits
+// stored in `fits`, refinement rounds, and the errors for bad input.
+#include "calibrate/calibration.hpp"
+#include "calibrate/map.hpp"
+#include "synthetic.hpp"
+
+#include "../cli/cli_util.hpp"
+
+#include "jobs/job_error.hpp"
+#include "jobs/job_spec.hpp"
+#include "jobs/runner.hpp"
+
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+namespace demcal::test {
+namespace {
+
+const std::vector<double> kTh = {15, 20, 25, 30, 35, 40};
+const std::vector<double> kEt = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5};
+
+std::string make_db(const TempDir& d, bool with_holes = true) {
+  const std::string path = d.file("demcal.db");
+  db::Store s(path);
+  if (with_holes)
+    store_fake_job(s, "grid", kTh, kEt, 2, 0.3, 7, {{25, 0.3}, {40, 0.0}}, {{15, 0.5}});
+  else
+    store_fake_job(s, "grid", kTh, kEt, 2, 0.3, 7);
+  return path;
+}
+
+TEST(CalibrateStore, GatherAveragesReplicasAndKeepsHoles) {
+  TempDir d;
+  db::Store s(make_db(d));
+  const auto rs = calibrate::gather(s, "grid", "phi_peak");
+  EXPECT_EQ(rs.points.size(), 36u);
+  EXPECT_EQ(rs.holes(), 3);
+  EXPECT_EQ(rs.with_data(), 33);
+  EXPECT_NEAR(rs.pooled_sd, 0.3, 0.15);
+  for (const auto& p : rs.points) {
+    if (p.theta == 25 && p.eta == 0.3) {
+      EXPECT_EQ(p.failed, 2);
+    }
+    if (p.theta == 15 && p.eta == 0.5) {
+      EXPECT_EQ(p.unfinished, 2);
+    }
+    if (!p.hole()) {
+      EXPECT_EQ(p.n(), 2);
+      EXPECT_NEAR(p.mean, phi_peak_fn(p.theta, p.eta), 1.5);
+      EXPECT_TRUE(std::isfinite(p.se));
+    }
+  }
+  const auto diff = calibrate::gather(s, "grid", "phi_diff");
+  EXPECT_NEAR(diff.points[1].mean, phi_peak_fn(15, 0.1) - phi_cv_fn(15, 0.1), 1.5);
+  EXPECT_THROW(calibrate::gather(s, "grid", "nonsense"), jobs::JobError);
+  EXPECT_THROW(calibrate::gather(s, "nojob", "phi_peak"), jobs::JobError);
+  EXPECT_THROW(calibrate::gather(s, "grid", "repose"), jobs::JobError);  // no data
+}
+
+TEST(CalibrateMap, WritesPngAndSvgWithHoles) {
+  TempDir d;
+  db::Store s(make_db(d));
+  const auto rs = calibrate::gather(s, "grid", "phi_peak");
+  const auto sur = calibrate::fit_surrogate(rs);
+  for (const char* name : {"m.png", "m.svg"}) {
+    calibrate::MapRequest r;
+    r.out = d.file(name);
+    calibrate::draw_map(rs, sur, r);
+    ASSERT_TRUE(fs::exists(r.out));
+    EXPECT_GT(fs::file_size(r.out), 1000u);
+  }
+  // DEMCAL_KEEP_MAPS=DIR keeps the drawn maps for a look.
+  if (const char* keep = std::getenv("DEMCAL_KEEP_MAPS"))
+    for (const char* name : {"m.png", "m.svg"}) fs::copy_file(d.file(name), fs::path(keep) / name, fs::copy_options::overwrite_existing);
+  const std::string svg = slurp(d.file("m.svg"));
+  EXPECT_NE(svg.find("<svg"), std::string::npos);
+  EXPECT_NE(svg.find("holes (failed or missing)"), std::string::npos);
+  calibrate::MapRequest bad;
+  bad.out = d.file("m.pdf");
+  EXPECT_THROW(calibrate::draw_map(rs, sur, bad), jobs::JobError);
+}
+
+TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
+  TempDir d;
+  const std::string db = make_db(d);
+  const double th = 28, et = 0.22;
+  const std::string pk = "phi_peak=" + std::to_string(phi_peak_fn(th, et)), cv = "phi_cv=" + std::to_string(phi_cv_fn(th, et));
+  auto r = run_demcal({"fit", "--target", pk, "--target", cv}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("best: theta = "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("95% region"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("LOO RMS"), std::string::npos) << r.out;
+  std::printf("%s", r.out.c_str());
+  {
+    db::Store s(db, true);
+    const auto fits = s.fits();
+    ASSERT_EQ(fits.size(), 1u);
+    const auto j = nlohmann::json::parse(fits[0].result_json);
+    EXPECT_EQ(j["status"], "ok");
+    EXPECT_NEAR(j["theta_deg"].get<double>(), th, 3.0);
+    EXPECT_NEAR(j["eta"].get<double>(), et, 0.05);
+    EXPECT_EQ(nlohmann::json::parse(fits[0].targets_json).size(), 2u);
+  }
+  // The map now draws the fit's region.
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("hole: theta = 25"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("95% region and best point of fit 1"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("m.svg")).find("95% region"), std::string::npos);
+  if (const char* keep = std::getenv("DEMCAL_KEEP_MAPS")) {
+    r = run_demcal({"map", "--metric", "phi_cv", "--out", "fit.png"}, d.path.string());
+    fs::copy_file(d.file("fit.png"), fs::path(keep) / "fit.png", fs::copy_options::overwrite_existing);
+  }
+  // JSON output with a given sigma.
+  r = run_demcal({"fit", "--target", pk, "--target", cv, "--sigma", "phi_peak=0.5", "--format", "json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["fit_id"], 2);
+  EXPECT_DOUBLE_EQ(j["targets"][0]["sigma"].get<double>(), 0.5);
+}
+
+TEST(CalibrateCli, UnreachableTargetExitsNonZeroNamingTheBound) {
+  TempDir d;
+  make_db(d);
+  const auto r = run_demcal({"fit", "--target", "phi_peak=75", "--target", "phi_cv=30"}, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.out << r.err;
+  EXPECT_NE(r.err.find("phi_peak = 75"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("upper bound"), std::string::npos) << r.err;
+  EXPECT_EQ(r.out.find("best: theta ="), std::string::npos) << r.out;
+}
+
+TEST(CalibrateCli, SingleTargetWarns) {
+  TempDir d;
+  make_db(d);
+  const auto r = run_demcal({"fit", "--target", "phi_peak=35"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("warning: one target for two unknowns"), std::string::npos) << r.out;
+}
+
+TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
+  TempDir d;
+  const std::string dir = d.path.string();
+  auto r = run_demcal({"fit", "--target", "phi_peak=40"}, dir);  // no database yet
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db"), std::string::npos) << r.err;
+  make_db(d);
+  r = run_demcal({"fit", "--target", "phi_peek=40"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--target"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("unknown metric \"phi_peek\""), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--target: expected METRIC=VALUE"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=4O"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("not a finite number"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--sigma", "phi_cv=1"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--sigma"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "repose=31"}, dir);  // a known metric nobody stored
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "other"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--job: no job named \"other\""), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "phi_pk"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--metric"), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "x.pdf"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "phi_peak", "--where", "particles=9"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+  // A job whose tasks never ran: no data.
+  {
+    db::Store s(d.file("demcal.db"));
+    store_fake_job(s, "idle", kTh, kEt, 1, 0, 1, {}, [] {
+      std::vector<FakePoint> all;
+      for (double th : kTh)
+        for (double et : kEt) all.push_back({th, et});
+      return all;
+    }());
+  }
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "idle"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+}
+
+TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
+  TempDir d;
+  {
+    db::Store s(d.file("demcal.db"));
+    // Same (theta, eta) grid at three pressures, merged into one job.
+    for (double p : {50.0, 100.0, 200.0})
+      store_fake_job(s, "mc" + std::to_string(static_cast<int>(p)), {20, 30}, {0.1, 0.2}, 1, 0.0, 3, {}, {}, p);
+    std::vector<db::NewTask> all;
+    for (const auto& name : {"mc50", "mc100", "mc200"})
+      for (const auto& t : s.tasks(name)) all.push_back({t.key, t.scene, t.params_json});
+    s.put_job("mc", "{}", all);
+  }
+  const auto r = run_demcal({"envelope", "--job", "mc"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  std::printf("%s", r.out.c_str());
+  // Zero cohesion by construction: phi equals phi_peak of the point, c about 0.
+  std::istringstream in(r.out);
+  std::string line;
+  std::getline(in, line);
+  double th = 0, et = 0, phi = 0, c = 0;
+  int n = 0, p = 0;
+  std::string pm;
+  double se = 0;
+  ASSERT_TRUE(std::getline(in, line));
+  std::istringstream ls(line);
+  ls >> th >> et >> n >> p >> phi >> pm >> se >> c;
+  EXPECT_EQ(p, 3);
+  EXPECT_NEAR(phi, phi_peak_fn(th, et), 1e-3);
+  EXPECT_NEAR(c, 0.0, 1e-3);
+}
+
+TEST(CalibrateRefine, RoundsConvergeOnTheTruthAndAreRecorded) {
+  TempDir d;
+  const std::string db = d.file("demcal.db");
+  db::Store s(db);
+  // A coarse grid; refinement runs add exact values where asked.
+  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+  const double th = 31.3, et = 0.27;
+  calibrate::FitRequest req;
+  req.targets = {{"phi_peak", phi_peak_fn(th, et)}, {"phi_cv", phi_cv_fn(th, et)}};
+  calibrate::Calibration cal = calibrate::calibrate(s, req);
+  calibrate::store_fit(s, req, cal, 0);
+  const double err0 = std::abs(cal.result.theta - th) / 30 + std::abs(cal.result.eta - et) / 0.6;
+  calibrate::RefineOptions ro;
+  ro.rounds = 4;
+  ro.tolerance = 0.01;
+  std::ostringstream log;
+  ro.log = &log;
+  int calls = 0;
+  ro.run_points = [&](db::Store& st, const std::string& job, int round, const std::vector<calibrate::RefinePoint>& pts) {
+    ++calls;
+    std::vector<double> ths, ets;
+    for (const auto& p : pts) ths.push_back(p.theta), ets.push_back(p.eta);
+    std::sort(ths.begin(), ths.end());
+    ths.erase(std::unique(ths.begin(), ths.end()), ths.end());
+    std::sort(ets.begin(), ets.end());
+    ets.erase(std::unique(ets.begin(), ets.end()), ets.end());
+    store_fake_job(st, calibrate::refine_job_name(job, round), ths, ets, 1, 0.0, 1);
+  };
+  const auto rounds = calibrate::refine(s, req, cal, ro);
+  ASSERT_FALSE(rounds.empty());
+  const double err1 = std::abs(cal.result.theta - th) / 30 + std::abs(cal.result.eta - et) / 0.6;
+  std::printf("refine: %zu round(s); error before %.4g, after %.4g; %s", rounds.size(), err0, err1, log.str().c_str());
+  EXPECT_EQ(calls, static_cast<int>(rounds.size()));
+  EXPECT_LE(err1, err0 + 1e-9);
+  EXPECT_NEAR(cal.result.theta, th, 1.0);
+  EXPECT_NEAR(cal.result.eta, et, 0.03);
+  EXPECT_EQ(s.fits().size(), rounds.size() + 1);
+  const auto last = nlohmann::json::parse(s.fits().back().result_json);
+  EXPECT_EQ(last["round"], static_cast<int>(rounds.size()));
+  EXPECT_TRUE(last["refine"].contains("move"));
+  // The refinement points are part of the surface now.
+  const auto rs = calibrate::gather(s, "coarse", "phi_peak");
+  int refine_points = 0;
+  for (const auto& p : rs.points) refine_points += p.refine;
+  EXPECT_GT(refine_points, 0);
+  EXPECT_EQ(rs.thetas.size(), 4u);  // the job's own axes are unchanged
+}
+
+TEST(CalibrateRefine, DemRunnerAppendsASubJobThroughTheJobsRunner) {
+  TempDir d;
+  const std::string db = d.file("demcal.db");
+  db::Store s(db);
+  nlohmann::json spec = {{"name", "col"},
+                         {"scene", "collision"},
+                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
+                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
+                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}}},
+                         {"seed", 1},
+                         {"threads", 1}};
+  const jobs::Job job = jobs::parse_job(spec.dump(), "test");
+  jobs::RunOptions ro;
+  ro.workers = 2;
+  ro.out_dir = d.file("out");
+  std::ostringstream log;
+  ro.log = &log;
+  ASSERT_EQ(jobs::run_job(s, job, ro).done, 4);
+  const auto runner = calibrate::dem_point_runner(d.file("out"), 2, &log);
+  runner(s, "col", 1, {{15, 0.15}, {17.5, 0.15}, {15, 0.175}, {17.5, 0.175}});
+  const auto sub = s.tasks(calibrate::refine_job_name("col", 1));
+  ASSERT_EQ(sub.size(), 4u);
+  for (const auto& t : sub) EXPECT_EQ(t.status, "done");
+  const auto rs = calibrate::gather(s, "col", "dt");
+  EXPECT_EQ(rs.points.size(), 8u);
+  EXPECT_EQ(rs.with_data(), 8);
+  EXPECT_EQ(calibrate::refine_jobs_of(s, "col"), std::vector<std::string>{"col.refine1"});
+  EXPECT_EQ(calibrate::base_jobs(s), std::vector<std::string>{"col"});
+}
+
+}  // namespace
+}  // namespace demcal::test

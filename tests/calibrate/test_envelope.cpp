@@ -1,0 +1,40 @@
+#include "calibrate/envelope.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace demcal::test {
+namespace {
+
+TEST(Envelope, MohrCoulombRecoversKnownFrictionAngleAndCohesion) {
+  const double phi = 35.0, c = 12.0;  // deg, kPa
+  const double N = std::pow(std::tan((45 + phi / 2) * M_PI / 180), 2);
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  std::vector<double> s3, s1;
+  for (double p : {50.0, 100.0, 200.0, 400.0})
+    for (int r = 0; r < 3; ++r) {
+      s3.push_back(p);
+      s1.push_back(N * p + 2 * c * std::sqrt(N) + noise(rng));
+    }
+  const auto e = calibrate::fit_envelope(s3, s1);
+  std::printf("phi %.3f +- %.3f deg, c %.3f +- %.3f kPa; phi (c = 0) %.3f\n", e.phi_deg, e.phi_se, e.c, e.c_se, e.phi0_deg);
+  EXPECT_GT(e.phi_se, 0);
+  EXPECT_GT(e.c_se, 0);
+  EXPECT_NEAR(e.phi_deg, phi, std::max(3 * e.phi_se, 0.05));
+  EXPECT_NEAR(e.c, c, std::max(3 * e.c_se, 0.5));
+  EXPECT_EQ(e.pressures, 4);
+  // Without noise and without cohesion, both lines agree exactly.
+  std::vector<double> t1;
+  for (double p : s3) t1.push_back(N * p);
+  const auto z = calibrate::fit_envelope(s3, t1);
+  EXPECT_NEAR(z.phi_deg, phi, 1e-9);
+  EXPECT_NEAR(z.c, 0, 1e-9);
+  EXPECT_NEAR(z.phi0_deg, phi, 1e-9);
+  EXPECT_THROW(calibrate::fit_envelope({100, 100}, {300, 310}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace demcal::test

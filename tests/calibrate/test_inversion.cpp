@@ -1,0 +1,164 @@
+#include "calibrate/inversion.hpp"
+#include "synthetic.hpp"
+
+#include "jobs/job_error.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+namespace demcal::test {
+namespace {
+
+using calibrate::Model;
+using calibrate::Target;
+
+Model model_of(const calibrate::ResponseSurface& rs) {
+  Model m;
+  m.metric = rs.metric;
+  m.job = rs.job;
+  m.surrogate = calibrate::fit_surrogate(rs);
+  m.replica_se = rs.replica_se();
+  return m;
+}
+
+const calibrate::Box kBox{15, 40, 0.0, 0.5};
+
+// One trial: noisy replicated grids of phi_peak and phi_cv, targets from the truth.
+struct Trial {
+  double theta, eta;
+  calibrate::FitResult fit;
+};
+Trial trial(std::uint64_t seed, double sigma_override = calibrate::kNaN) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ut(18, 37), ue(0.05, 0.45);
+  Trial t;
+  t.theta = ut(rng);
+  t.eta = ue(rng);
+  const auto pk = synthetic_surface(phi_peak_fn, 0.4, 2, rng, "phi_peak");
+  const auto cv = synthetic_surface(phi_cv_steep, 0.4, 2, rng, "phi_cv");
+  std::vector<Target> targets = {{"phi_peak", phi_peak_fn(t.theta, t.eta), sigma_override},
+                                 {"phi_cv", phi_cv_steep(t.theta, t.eta), sigma_override}};
+  t.fit = calibrate::invert({model_of(pk), model_of(cv)}, targets, kBox);
+  return t;
+}
+
+TEST(Inversion, RecoversKnownParametersInsideThe95PercentRegion) {
+  int covered = 0, ok = 0;
+  double worst_theta = 0, worst_eta = 0;
+  for (std::uint64_t seed = 1; seed <= 50; ++seed) {
+    const Trial t = trial(seed);
+    ok += t.fit.ok;
+    if (t.fit.region.contains(t.fit.box, t.theta, t.eta)) ++covered;
+    worst_theta = std::max(worst_theta, std::abs(t.fit.theta - t.theta));
+    worst_eta = std::max(worst_eta, std::abs(t.fit.eta - t.eta));
+  }
+  std::printf("true point inside the 95%% region in %d of 50 trials; largest error theta %.3g deg, eta %.3g\n", covered,
+              worst_theta, worst_eta);
+  EXPECT_EQ(ok, 50);
+  EXPECT_GE(covered, 43);  // >= 85%
+  EXPECT_LT(worst_theta, 5.0);
+  EXPECT_LT(worst_eta, 0.1);
+}
+
+TEST(Inversion, CoverageCheckCanFail) {
+  // The same trials with sigma far below the real surrogate error: the region
+  // shrinks around a biased point and misses the truth. The coverage assertion
+  // above is therefore a real test.
+  int covered = 0;
+  for (std::uint64_t seed = 1; seed <= 50; ++seed) {
+    const Trial t = trial(seed, 0.005);
+    if (t.fit.region.contains(t.fit.box, t.theta, t.eta)) ++covered;
+  }
+  std::printf("with sigma 0.005: %d of 50 covered\n", covered);
+  EXPECT_LT(covered, 43);
+}
+
+TEST(Inversion, ReportsBestPointPredictionsAndRegion) {
+  const Trial t = trial(7);
+  ASSERT_TRUE(t.fit.ok);
+  ASSERT_EQ(t.fit.targets.size(), 2u);
+  for (const auto& tf : t.fit.targets) {
+    EXPECT_NEAR(tf.residual, tf.predicted - tf.target, 1e-12);
+    EXPECT_LT(std::abs(tf.residual), tf.sigma);
+    EXPECT_GT(tf.sigma, 0);
+  }
+  EXPECT_LE(t.fit.region.theta_lo, t.fit.theta);
+  EXPECT_GE(t.fit.region.theta_hi, t.fit.theta);
+  EXPECT_LE(t.fit.region.eta_lo, t.fit.eta);
+  EXPECT_GE(t.fit.region.eta_hi, t.fit.eta);
+  const auto j = t.fit.to_json();
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_TRUE(j.contains("theta_deg"));
+}
+
+TEST(Inversion, OneTargetForTwoUnknownsWarns) {
+  std::mt19937_64 rng(3);
+  const auto pk = synthetic_surface(phi_peak_fn, 0.3, 2, rng, "phi_peak");
+  const auto fit = calibrate::invert({model_of(pk)}, {{"phi_peak", phi_peak_fn(28, 0.2)}}, kBox);
+  ASSERT_TRUE(fit.ok);
+  bool curve = false;
+  for (const auto& w : fit.warnings) curve = curve || w.find("one target for two unknowns") != std::string::npos;
+  EXPECT_TRUE(curve);
+}
+
+TEST(Inversion, PhiCvFlatInThetaWarnsThatThetaIsNotPinned) {
+  std::mt19937_64 rng(4);
+  const auto cv = synthetic_surface(phi_cv_flat, 0.2, 2, rng, "phi_cv");
+  const auto fit = calibrate::invert({model_of(cv)}, {{"phi_cv", phi_cv_flat(32, 0.2)}}, kBox);
+  ASSERT_TRUE(fit.ok);
+  bool theta = false;
+  for (const auto& w : fit.warnings) {
+    std::printf("warning: %s\n", w.c_str());
+    theta = theta || w.find("theta") != std::string::npos;
+  }
+  EXPECT_TRUE(theta);
+  EXPECT_TRUE(fit.region.at_theta_hi);
+}
+
+TEST(Inversion, UnreachableTargetNamesTheMetricAndTheBound) {
+  std::mt19937_64 rng(5);
+  const auto pk = synthetic_surface(phi_peak_fn, 0.3, 2, rng, "phi_peak");
+  const auto cv = synthetic_surface(phi_cv_fn, 0.3, 2, rng, "phi_cv");
+  // Above anything the grid reaches.
+  auto fit = calibrate::invert({model_of(pk), model_of(cv)}, {{"phi_peak", 70.0}, {"phi_cv", 32.0}}, kBox);
+  EXPECT_FALSE(fit.ok);
+  ASSERT_FALSE(fit.unreachable.empty());
+  std::printf("unreachable: %s\n", fit.unreachable.front().c_str());
+  EXPECT_NE(fit.unreachable.front().find("phi_peak = 70"), std::string::npos);
+  EXPECT_NE(fit.unreachable.front().find("above"), std::string::npos);
+  EXPECT_NE(fit.unreachable.front().find("theta upper bound"), std::string::npos);
+  EXPECT_FALSE(fit.to_json().contains("theta_deg"));  // no answer presented
+  // Below.
+  fit = calibrate::invert({model_of(pk)}, {{"phi_peak", 5.0}}, kBox);
+  EXPECT_FALSE(fit.ok);
+  ASSERT_FALSE(fit.unreachable.empty());
+  EXPECT_NE(fit.unreachable.front().find("below"), std::string::npos);
+  EXPECT_NE(fit.unreachable.front().find("theta lower bound"), std::string::npos);
+  // Each reachable alone, not together inside the box: the best point sits on a bound.
+  const double pk_lo = phi_peak_fn(15, 0.0);
+  fit = calibrate::invert({model_of(pk), model_of(cv)}, {{"phi_peak", pk_lo + 0.5, 0.2}, {"phi_cv", 34.5, 0.2}}, kBox);
+  EXPECT_FALSE(fit.ok);
+  ASSERT_FALSE(fit.unreachable.empty());
+  std::printf("unreachable: %s\n", fit.unreachable.front().c_str());
+  EXPECT_NE(fit.unreachable.front().find("misses phi_"), std::string::npos);
+  EXPECT_FALSE(fit.to_json().contains("theta_deg"));
+}
+
+TEST(Inversion, ParsesTargetsAndSigmas) {
+  auto t = calibrate::parse_target("phi_peak=41.4");
+  EXPECT_EQ(t.metric, "phi_peak");
+  EXPECT_DOUBLE_EQ(t.value, 41.4);
+  EXPECT_THROW(calibrate::parse_target("phi_peak"), jobs::JobError);
+  EXPECT_THROW(calibrate::parse_target("phi_peak=abc"), jobs::JobError);
+  EXPECT_THROW(calibrate::parse_target("=3"), jobs::JobError);
+  EXPECT_THROW(calibrate::parse_target("phi peak=3"), jobs::JobError);
+  std::vector<Target> ts = {t};
+  calibrate::apply_sigma(ts, "phi_peak=0.5");
+  EXPECT_DOUBLE_EQ(ts[0].sigma, 0.5);
+  EXPECT_THROW(calibrate::apply_sigma(ts, "phi_cv=0.5"), jobs::JobError);
+  EXPECT_THROW(calibrate::apply_sigma(ts, "phi_peak=-1"), jobs::JobError);
+}
+
+}  // namespace
+}  // namespace demcal::test

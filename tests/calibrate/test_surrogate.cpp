@@ -1,0 +1,65 @@
+#include "calibrate/surrogate.hpp"
+#include "synthetic.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+namespace demcal::test {
+namespace {
+
+struct Accuracy {
+  double rms = 0, max = 0;
+};
+
+Accuracy accuracy(const calibrate::Surrogate& s, const Fn& f) {
+  std::mt19937_64 rng(99);
+  std::uniform_real_distribution<double> ut(15, 40), ue(0, 0.5);
+  Accuracy a;
+  const int n = 2000;
+  for (int i = 0; i < n; ++i) {
+    const double th = ut(rng), et = ue(rng), e = s(th, et) - f(th, et);
+    a.rms += e * e;
+    a.max = std::max(a.max, std::abs(e));
+  }
+  a.rms = std::sqrt(a.rms / n);
+  return a;
+}
+
+TEST(Surrogate, ReproducesAnAnalyticSurfaceWithinItsLooError) {
+  std::mt19937_64 rng(1);
+  const auto rs = synthetic_surface(phi_peak_fn, 0.0, 1, rng);
+  const auto s = calibrate::fit_surrogate(rs);
+  const Accuracy a = accuracy(s, phi_peak_fn);
+  std::printf("noise-free phi_peak surface, 36 points: %s; true RMS error %.4g, max %.4g\n", s.describe().c_str(), a.rms, a.max);
+  EXPECT_GT(s.loo_rms(), 0.0);
+  // LOO is an estimate of the prediction error, not a bound: within 25% of it over
+  // the whole box, and no point off by more than 3 times it.
+  EXPECT_LE(a.rms, 1.25 * s.loo_rms());
+  EXPECT_LE(a.max, 3 * s.loo_rms());
+  EXPECT_LT(s.loo_rms(), 0.5);  // a smooth surface over a 6 x 6 grid: well below a degree
+  // Data points are reproduced closely.
+  for (const auto& p : rs.points) EXPECT_NEAR(s(p.theta, p.eta), p.mean, 3 * s.loo_rms());
+}
+
+TEST(Surrogate, NoisyDataAreSmoothedAndTheLooErrorCoversTheTruth) {
+  std::mt19937_64 rng(2);
+  const auto rs = synthetic_surface(phi_peak_fn, 0.5, 2, rng);
+  const auto s = calibrate::fit_surrogate(rs);
+  const Accuracy a = accuracy(s, phi_peak_fn);
+  std::printf("noisy (sd 0.5, 2 replicas): %s; true RMS error %.4g; replica se %.3g\n", s.describe().c_str(), a.rms, rs.replica_se());
+  EXPECT_LE(a.rms, s.loo_rms());
+  EXPECT_NEAR(rs.pooled_sd, 0.5, 0.2);
+  // Smoothing chosen: not an interpolant of the noise.
+  EXPECT_FALSE(s.kind() == calibrate::SurrogateKind::thin_plate && s.lambda() == 0.0);
+}
+
+TEST(Surrogate, RefusesPointsThatCannotCarryASurface) {
+  EXPECT_THROW(calibrate::fit_surrogate({15, 20, 25}, {0.1, 0.1, 0.1}, {1, 2, 3}, {1, 1, 1}, {15, 25, 0, 0.5}),
+               std::invalid_argument);
+  EXPECT_THROW(calibrate::fit_surrogate({15, 20, 25, 30}, {0.1, 0.1, 0.1, 0.1}, {1, 2, 3, 4}, {1, 1, 1, 1}, {15, 30, 0, 0.5}),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace demcal::test

@@ -1,0 +1,123 @@
+// The MPI task farm under a real mpirun (built and registered only with DEMCAL_MPI=ON).
+#include "dist_util.hpp"
+
+using namespace demcal::test;
+
+namespace {
+
+const std::vector<double> kFactors = {0.05, 0.07, 0.09, 0.11, 0.13, 0.15};
+
+const std::map<std::string, std::string> kMpiEnv = {
+    {"OMPI_ALLOW_RUN_AS_ROOT", "1"},  // the tests may run as root (CI containers)
+    {"OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1"},
+};
+
+Result mpirun(int ranks, const std::vector<std::string>& mpi_flags, const std::vector<std::string>& demcal_args,
+              const std::string& dir, std::map<std::string, std::string> env = {}) {
+  std::vector<std::string> argv = {DEMCAL_MPIEXEC, "-np", std::to_string(ranks), "--oversubscribe"};
+  argv.insert(argv.end(), mpi_flags.begin(), mpi_flags.end());
+  argv.push_back(DEMCAL_BIN);
+  argv.insert(argv.end(), demcal_args.begin(), demcal_args.end());
+  env.insert(kMpiEnv.begin(), kMpiEnv.end());
+  return run_program(argv, dir, env);
+}
+
+int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string& status) {
+  int n = 0;
+  for (const auto& r : rows) n += r.status == status;
+  return n;
+}
+
+}  // namespace
+
+TEST(Mpi, FarmEqualsLocalRunBitForBit) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("farm", kFactors));  // threads = 1, as the local run
+  const Result local = run_demcal({"run", "j.json", "--db", "local.db", "--workers", "2"}, d.path.string());
+  ASSERT_EQ(local.rc, 0) << local.err;
+  const Result r = mpirun(3, {}, {"run", "j.json", "--mpi", "--db", "mpi.db"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("MPI task farm: 2 worker rank(s), 6 task(s)"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("on rank 1"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("on rank 2"), std::string::npos) << r.err;
+  EXPECT_GT(expect_same_results(d.file("local.db"), d.file("mpi.db"), "farm"), 6 * 3);
+  // Only rank 0 opened a database; every task ran once and wrote its series.
+  EXPECT_FALSE(fs::exists(d.file("demcal.db")));
+  demcal::db::Store s(d.file("mpi.db"), true);
+  for (const auto& t : s.tasks("farm")) {
+    EXPECT_EQ(t.attempts, 1);
+    ASSERT_EQ(s.artifacts(t.id).size(), 1u);
+    EXPECT_TRUE(fs::exists(s.artifacts(t.id)[0].second));
+  }
+  // Resumable like a local run: everything is reused.
+  const Result again = mpirun(3, {}, {"run", "j.json", "--mpi", "--db", "mpi.db"}, d.path.string());
+  EXPECT_EQ(again.rc, 0) << again.err;
+  EXPECT_NE(again.err.find("6 of 6 task(s) already done"), std::string::npos) << again.err;
+}
+
+TEST(Mpi, CrashingTaskFailsOnlyItsTask) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("crash", {0.05, 0.1, 0.2}));
+  const Result r = mpirun(3, {}, {"run", "j.json", "--mpi"}, d.path.string(), {{"DEMCAL_TEST_ABORT_TASK", "1"}});
+  EXPECT_EQ(r.rc, 1) << r.err;
+  const auto rows = tasks_of(d.file("demcal.db"), "crash");
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0].status, "done");
+  EXPECT_EQ(rows[1].status, "failed");
+  EXPECT_NE(rows[1].error.find("SIGABRT"), std::string::npos) << rows[1].error;
+  EXPECT_EQ(rows[2].status, "done");
+}
+
+// OpenMPI run with --enable-recovery keeps the job alive when a rank dies: rank 0
+// notices the silence, fails the lost rank's task with the reason and finishes.
+TEST(Mpi, KilledWorkerRankIsReportedAndRankZeroFinishes) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("lost", kFactors));
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = mpirun(3, {"--enable-recovery"}, {"run", "j.json", "--mpi", "--mpi-timeout", "3"}, d.path.string(),
+                          {{"DEMCAL_TEST_KILL_RANK_TASK", "1"}});
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // (mpirun --enable-recovery exits 0 whatever rank 0 returns; the log and the database tell.)
+  EXPECT_NE(r.err.find("lost: no message for 3 s"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("5 done (0 reused), 1 failed"), std::string::npos) << r.err;
+  EXPECT_LT(wall, 45);
+  const auto rows = tasks_of(d.file("demcal.db"), "lost");
+  ASSERT_EQ(rows.size(), kFactors.size());
+  EXPECT_EQ(count_status(rows, "done"), 5);
+  EXPECT_EQ(rows[1].status, "failed");
+  EXPECT_NE(rows[1].error.find("worker rank"), std::string::npos) << rows[1].error;
+  EXPECT_NE(rows[1].error.find("lost"), std::string::npos) << rows[1].error;
+  // The lost task runs again on request.
+  const Result retry = run_demcal({"run", "j.json", "--retry-failed"}, d.path.string());
+  EXPECT_EQ(retry.rc, 0) << retry.err;
+  EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "lost"), "done"), 6);
+}
+
+// Plain mpirun (no recovery) aborts the whole job when a rank dies: it must end,
+// not hang, and the next run picks up what was unfinished.
+TEST(Mpi, KilledWorkerRankWithoutRecoveryEndsTheJobAndTheNextRunResumes) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("abort", kFactors));
+  const Result r = mpirun(3, {}, {"run", "j.json", "--mpi", "--mpi-timeout", "2"}, d.path.string(),
+                          {{"DEMCAL_TEST_KILL_RANK_TASK", "1"}});
+  EXPECT_NE(r.rc, 0) << r.err;
+  const auto rows = tasks_of(d.file("demcal.db"), "abort");
+  EXPECT_LT(count_status(rows, "done"), 6);
+  const Result resume = run_demcal({"run", "j.json"}, d.path.string());
+  EXPECT_EQ(resume.rc, 0) << resume.err;
+  EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "abort"), "done"), 6);
+}
+
+TEST(Mpi, BadInputUnderMpirunEndsEveryRank) {
+  TempDir d;
+  write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "material": {"theta_deg": 90}})");
+  Result r = mpirun(3, {}, {"run", "bad.json", "--mpi"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("material.theta_deg"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("demcal.db")));
+  write(d.file("j.json"), collision_job("one", {0.1}));
+  r = mpirun(1, {}, {"run", "j.json", "--mpi"}, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("at least 2 ranks"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("demcal.db")));
+}

@@ -1,0 +1,112 @@
+// demcal study (issue 9): quick versions run in seconds, write their charts and a
+// recommendation, store the timestep tasks in the database, and bad input fails
+// with a clear message and exit code 2.
+#include "cli_util.hpp"
+
+using namespace demcal::test;
+
+TEST(CliStudy, TimestepQuickWritesChartsRecommendationAndStoresTasks) {
+  TempDir d;
+  const Result r = run_demcal({"study", "timestep", "--quick", "--workers", "2", "--db", "s.db", "--out", "charts"},
+                              d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  for (const char* f : {"timestep_drift.png", "timestep_cost.png", "timestep.csv", "timestep_recommendation.txt"}) {
+    const fs::path p = d.path / "charts" / f;
+    EXPECT_TRUE(fs::exists(p) && fs::file_size(p) > 0) << f;
+  }
+  EXPECT_NE(r.out.find("recommended dt_factor"), std::string::npos) << r.out;
+  // Past both critical factors the runs are marked unstable, not hidden.
+  EXPECT_NE(r.out.find("unstable"), std::string::npos) << r.out;
+  // The tasks went through the runner into the database: query sees them.
+  const Result q = run_demcal({"query", "--db", "s.db", "--job", "study-timestep-quick", "--format", "csv"},
+                              d.path.string());
+  EXPECT_EQ(q.rc, 0) << q.err;
+  EXPECT_NE(q.out.find("drift_per_simulated_s"), std::string::npos) << q.out;
+  const std::string first_recommendation = slurp(d.file("charts/timestep_recommendation.txt"));
+  // Running it again runs nothing: finished tasks are reused, failed (unstable)
+  // ones are kept as failed.
+  const Result again = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "charts"}, d.path.string());
+  EXPECT_EQ(again.rc, 0) << again.err;
+  EXPECT_NE(again.out.find("reused, 0 run now"), std::string::npos) << again.out;
+  EXPECT_EQ(slurp(d.file("charts/timestep_recommendation.txt")), first_recommendation);
+}
+
+TEST(CliStudy, GrazingQuickChartsTheEnergyRatio) {
+  TempDir d;
+  const Result r = run_demcal({"study", "grazing", "--quick", "--out", "g"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_TRUE(fs::exists(d.path / "g" / "grazing_energy.png"));
+  EXPECT_NE(slurp(d.file("g/grazing.csv")).find("free_sphere"), std::string::npos);
+  EXPECT_NE(r.out.find("largest energy ratio"), std::string::npos) << r.out;
+}
+
+TEST(CliStudy, UnknownStudyIsBadInput) {
+  TempDir d;
+  Result r = run_demcal({"study", "fidelty"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("unknown study \"fidelty\""), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("timestep"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "demcal.db"));  // nothing written
+  r = run_demcal({"study"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  r = run_demcal({"study", "timestep", "--tolerance", "-1"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+}
+
+// The triaxial fidelity study, quick and restricted to the dt knob: the baseline
+// 0.3, the reference 0.15 and 2.0 (past the engine's critical step: every replica
+// fails at once). Two replicas, one worker: a few seconds on one core.
+TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
+  TempDir d;
+  const std::vector<std::string> args = {"study", "fidelity", "--quick", "--knobs", "dt", "--replicas", "2",
+                                         "--workers", "1", "--db", "s.db", "--out", "f"};
+  const Result r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  for (const char* f : {"fidelity_dt.png", "fidelity.csv", "fidelity_recommendation.txt",
+                        "jobs/study-fidelity-quick-dt.json"}) {
+    const fs::path p = d.path / "f" / f;
+    EXPECT_TRUE(fs::exists(p) && fs::file_size(p) > 0) << f;
+  }
+  EXPECT_NE(r.out.find("job file f/jobs/study-fidelity-quick-dt.json"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("6 tasks in s.db (0 reused, 6 run now)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("dt: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("recommended settings (fidelity, one knob at a time"), std::string::npos) << r.out;
+  // The failed setting is listed, counted and drawn, not dropped.
+  EXPECT_NE(r.out.find("failed tasks (2)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("dt=2 seed 1: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("dt=2 seed 2: "), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"2: 2/2 failed\""), std::string::npos);
+  const std::string csv = slurp(d.file("f/fidelity.csv"));
+  EXPECT_NE(csv.find("phi_peak_deg_error"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("dt,2,0,0,2,2,"), std::string::npos) << csv;
+  // The tasks are in the database under the written job, which validates as is.
+  const Result q = run_demcal({"query", "--db", "s.db", "--job", "study-fidelity-quick-dt", "--format", "csv"},
+                              d.path.string());
+  EXPECT_EQ(q.rc, 0) << q.err;
+  EXPECT_NE(q.out.find("phi_cv_deg"), std::string::npos) << q.out;
+  EXPECT_EQ(run_demcal({"validate", "f/jobs/study-fidelity-quick-dt.json"}, d.path.string()).rc, 0);
+  const std::string first = slurp(d.file("f/fidelity_recommendation.txt"));
+  // Again: every task is reused (the failed ones stay failed), nothing runs.
+  const Result again = run_demcal(args, d.path.string());
+  ASSERT_EQ(again.rc, 0) << again.err;
+  EXPECT_NE(again.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << again.out;
+  EXPECT_EQ(slurp(d.file("f/fidelity_recommendation.txt")), first);
+}
+
+TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
+  TempDir d;
+  Result r = run_demcal({"study", "fidelity", "--quick", "--knobs", "particles,partcles"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("unknown knob \"partcles\""), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("particles, rate, dt, density"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "demcal.db"));  // nothing written
+  r = run_demcal({"study", "repose-fidelity", "--knobs", "slab"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("unknown knob \"slab\""), std::string::npos) << r.err;
+  r = run_demcal({"study", "fidelity", "--reference", "rate"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--reference"), std::string::npos) << r.err;
+  r = run_demcal({"study", "timestep", "--knobs", "dt"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_FALSE(fs::exists(d.path / "demcal.db"));
+}

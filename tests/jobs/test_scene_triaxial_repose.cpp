@@ -1,0 +1,339 @@
+// The triaxial and repose scenes in the jobs layer: their parameter tables, the
+// example jobs, fidelity presets, rejection of bad input naming the field, and one
+// quick task of each run through the runner into a temporary store.
+#include "db/store.hpp"
+#include "jobs/job_error.hpp"
+#include "jobs/job_spec.hpp"
+#include "jobs/runner.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <set>
+#include <sstream>
+#include <unistd.h>
+
+using demcal::jobs::Job;
+using demcal::jobs::JobError;
+using demcal::jobs::parse_job;
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+namespace {
+
+json triaxial_base() {
+  return json::parse(R"({
+    "name": "tri", "scene": "triaxial",
+    "material": {"kn": 3e7, "ks": 2.7e7, "density": 2650, "b": 1.0, "theta_deg": 30, "eta": 0.1,
+                 "diameter": {"min": 0.001, "max": 0.002}},
+    "triaxial": {"particles": 400, "packing": "dense", "confining_kpa": 100, "strain_rate": 1e-4,
+                 "axial_strain": 0.3, "density_scale": 1e9},
+    "grid": {"theta_deg": [20, 30]},
+    "replicas": 1, "seed": 1
+  })");
+}
+
+json repose_base() {
+  return json::parse(R"({
+    "name": "rep", "scene": "repose",
+    "material": {"kn": 3e7, "ks": 2.7e7, "density": 2650, "b": 1.0, "theta_deg": 30, "eta": 0.1,
+                 "diameter": {"min": 0.001, "max": 0.002}},
+    "repose": {"column_width": 0.05, "column_height": 0.05, "depth_diameters": 4},
+    "grid": {"eta": [0.0, 0.1]},
+    "replicas": 1, "seed": 1
+  })");
+}
+
+Job parse(const json& j) { return parse_job(j.dump(), "test.json"); }
+
+std::string error_of(const json& j) {
+  try {
+    parse(j);
+  } catch (const JobError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+Job example(const char* name) { return demcal::jobs::load_job_file(std::string(DEMCAL_EXAMPLES_DIR) + "/" + name); }
+
+}  // namespace
+
+// ---- parameters and validation -------------------------------------------------
+
+TEST(TriaxialReposeScenes, ExamplesValidate) {
+  const Job t22 = example("table-2-2.json");
+  EXPECT_EQ(t22.scene, "triaxial");
+  EXPECT_EQ(t22.tasks.size(), 6u);
+  const json& p = t22.tasks[0].params;
+  EXPECT_EQ(p["packing"], "dense");
+  EXPECT_DOUBLE_EQ(p["confining_kpa"].get<double>(), 100.0);
+  EXPECT_DOUBLE_EQ(p["eta"].get<double>(), 0.1);
+  EXPECT_EQ(p["particles"].get<long>(), 2000);  // the standard preset
+  EXPECT_DOUBLE_EQ(p["cv_from"].get<double>(), 0.2);
+  EXPECT_DOUBLE_EQ(p["cv_to"].get<double>(), 0.3);
+  EXPECT_TRUE(p.contains("dt_factor"));
+
+  const Job t23 = example("table-2-3.json");
+  EXPECT_EQ(t23.tasks.size(), 4u);
+  EXPECT_EQ(t23.tasks[0].params["packing"], "dense");
+  std::set<std::string> keys;
+  for (const auto& t : t22.tasks) keys.insert(t.key);
+  for (const auto& t : t23.tasks) keys.insert(t.key);
+  EXPECT_EQ(keys.size(), 9u);  // the two tables share theta = 30, eta = 0.1
+
+  // The seed study's job files validate and share their tasks with the dense grid.
+  std::set<std::string> grid;
+  for (const auto& t : example("seed-study/dense-grid.json").tasks) grid.insert(t.key);
+  EXPECT_EQ(grid.size(), 24u);
+  for (const char* f : {"seed-study/table-2-2.json", "seed-study/table-2-3.json"})
+    for (const auto& t : example(f).tasks) EXPECT_EQ(grid.count(t.key), 1u) << f;
+  EXPECT_EQ(example("seed-study/replicas.json").tasks.size(), 3u);
+  EXPECT_EQ(example("seed-study/dense-loose-envelope.json").tasks.size(), 4u);
+  EXPECT_EQ(example("seed-study/repose.json").tasks.size(), 5u);
+
+  const Job rep = example("repose.json");
+  EXPECT_EQ(rep.scene, "repose");
+  EXPECT_EQ(rep.tasks.size(), 48u);
+  EXPECT_DOUBLE_EQ(rep.tasks[0].params["column_width"].get<double>(), 0.05);
+  EXPECT_DOUBLE_EQ(rep.tasks[0].params["depth_diameters"].get<double>(), 4.0);
+}
+
+TEST(TriaxialReposeScenes, ConfiningPressureAndPackingAreGridAxes) {
+  json j = triaxial_base();
+  j["grid"] = {{"confining_kpa", {50, 100, 200}}, {"packing", {"dense", "loose"}}};
+  const Job job = parse(j);
+  ASSERT_EQ(job.tasks.size(), 6u);
+  std::set<std::string> keys;
+  std::set<std::pair<double, std::string>> seen;
+  for (const auto& t : job.tasks) {
+    keys.insert(t.key);
+    seen.insert({t.params["confining_kpa"].get<double>(), t.params["packing"].get<std::string>()});
+  }
+  EXPECT_EQ(keys.size(), 6u);
+  EXPECT_EQ(seen.size(), 6u);
+  EXPECT_TRUE(seen.count({200.0, "loose"}));
+  // A list in the section is an axis too.
+  json k = triaxial_base();
+  k["triaxial"]["packing"] = {"dense", "loose"};
+  EXPECT_EQ(parse(k).tasks.size(), 4u);
+}
+
+TEST(TriaxialReposeScenes, FidelityFillsWhatTheJobOmits) {
+  json j = triaxial_base();
+  j["triaxial"].erase("particles");
+  j["triaxial"].erase("strain_rate");
+  std::map<std::string, json> by;
+  for (const char* f : {"quick", "standard", "reference"}) {
+    j["fidelity"] = f;
+    by[f] = parse(j).tasks[0].params;
+  }
+  EXPECT_LT(by["quick"]["particles"].get<long>(), by["standard"]["particles"].get<long>());
+  EXPECT_LT(by["standard"]["particles"].get<long>(), by["reference"]["particles"].get<long>());
+  EXPECT_GT(by["quick"]["strain_rate"].get<double>(), by["standard"]["strain_rate"].get<double>());
+  EXPECT_EQ(by["standard"]["particles"].get<long>(), 2000);
+  // What the job gives wins over the preset.
+  j["fidelity"] = "quick";
+  j["triaxial"]["particles"] = 1000;
+  EXPECT_EQ(parse(j).tasks[0].params["particles"].get<long>(), 1000);
+
+  json r = repose_base();
+  r["repose"] = json::object();
+  r["fidelity"] = "quick";
+  const json q = parse(r).tasks[0].params;
+  r["fidelity"] = "reference";
+  const json ref = parse(r).tasks[0].params;
+  EXPECT_LT(q["column_width"].get<double>(), ref["column_width"].get<double>());
+  EXPECT_LT(q["stiffness_scale"].get<double>(), ref["stiffness_scale"].get<double>());
+  EXPECT_LT(q["time_limit"].get<double>(), ref["time_limit"].get<double>());
+}
+
+TEST(TriaxialReposeScenes, CriticalStateWindowFollowsTheAxialStrain) {
+  json j = triaxial_base();
+  j["triaxial"]["axial_strain"] = 0.15;
+  const json p = parse(j).tasks[0].params;
+  EXPECT_DOUBLE_EQ(p["cv_to"].get<double>(), 0.15);
+  EXPECT_DOUBLE_EQ(p["cv_from"].get<double>(), 0.1);
+}
+
+namespace {
+struct Bad {
+  const char* name;
+  bool repose;                        // mutate repose_base() instead of triaxial_base()
+  std::function<void(json&)> mutate;
+  const char* field;                  // must appear in the message
+};
+
+const std::vector<Bad>& bad_cases() {
+  static const std::vector<Bad> v = {
+      {"confining_negative", false, [](json& j) { j["triaxial"]["confining_kpa"] = -100; }, "triaxial.confining_kpa"},
+      {"confining_zero_in_grid", false, [](json& j) { j["grid"]["confining_kpa"] = {100, 0}; }, "grid.confining_kpa[1]"},
+      {"packing_unknown", false, [](json& j) { j["triaxial"]["packing"] = "medium"; }, "triaxial.packing"},
+      {"packing_unknown_in_grid", false, [](json& j) { j["grid"]["packing"] = {"dense", "lose"}; }, "grid.packing[1]"},
+      {"packing_number", false, [](json& j) { j["triaxial"]["packing"] = 1; }, "triaxial.packing"},
+      {"eta_negative", false, [](json& j) { j["material"]["eta"] = -0.1; }, "material.eta"},
+      {"eta_negative_in_grid", false, [](json& j) { j["grid"]["eta"] = {0.1, -0.2}; }, "grid.eta[1]"},
+      {"theta_90", false, [](json& j) { j["grid"]["theta_deg"] = {30, 90}; }, "grid.theta_deg[1]"},
+      {"dt_and_dt_factor", false, [](json& j) { j["triaxial"]["dt"] = 1e-3; j["triaxial"]["dt_factor"] = 0.2; }, "triaxial.dt"},
+      {"density_scale_and_scaled_density", false, [](json& j) { j["triaxial"]["scaled_density"] = 2.65e12; }, "triaxial.density_scale"},
+      {"particles_too_few", false, [](json& j) { j["triaxial"]["particles"] = 10; }, "triaxial.particles"},
+      {"strain_rate_zero", false, [](json& j) { j["triaxial"]["strain_rate"] = 0; }, "triaxial.strain_rate"},
+      {"axial_strain_too_large", false, [](json& j) { j["triaxial"]["axial_strain"] = 0.7; }, "triaxial.axial_strain"},
+      {"cv_to_beyond_axial_strain", false, [](json& j) { j["triaxial"]["cv_to"] = 0.35; }, "triaxial.cv_to"},
+      {"cv_from_above_cv_to", false, [](json& j) { j["triaxial"]["cv_from"] = 0.3; j["triaxial"]["cv_to"] = 0.25; }, "triaxial.cv_from"},
+      {"sample_strain_beyond", false, [](json& j) { j["triaxial"]["axial_strain"] = 0.01; j["triaxial"]["sample_strain"] = 0.02; }, "triaxial.sample_strain"},
+      {"aspect_ratio_too_large", false, [](json& j) { j["triaxial"]["aspect_ratio"] = 5; }, "triaxial.aspect_ratio"},
+      {"servo_alpha_too_large", false, [](json& j) { j["triaxial"]["servo_alpha"] = 1.5; }, "triaxial.servo_alpha"},
+      {"prep_damping_one", false, [](json& j) { j["triaxial"]["prep_damping"] = 1.0; }, "triaxial.prep_damping"},
+      {"triaxial_typo", false, [](json& j) { j["triaxial"]["confining_kPa"] = 100; }, "triaxial.confining_kPa"},
+      {"repose_section_in_triaxial_job", false, [](json& j) { j["repose"] = json::object(); }, "repose"},
+      {"repose_dt_and_dt_factor", true, [](json& j) { j["repose"]["dt"] = 1e-6; j["repose"]["dt_factor"] = 0.3; }, "repose.dt"},
+      {"repose_particles_not_a_knob", true, [](json& j) { j["repose"]["particles"] = 3000; }, "repose.particles"},
+      {"repose_eta_negative", true, [](json& j) { j["grid"]["eta"] = {-0.1}; }, "grid.eta[0]"},
+      {"repose_slab_too_thin", true, [](json& j) { j["repose"]["depth_diameters"] = 1.5; }, "repose.depth_diameters"},
+      {"repose_column_too_narrow", true, [](json& j) { j["repose"]["column_width"] = 0.003; }, "repose.column_width"},
+      {"repose_stiffness_scale_above_one", true, [](json& j) { j["repose"]["stiffness_scale"] = 2; }, "repose.stiffness_scale"},
+      {"repose_fit_window_inverted", true, [](json& j) { j["repose"]["fit_lo"] = 0.8; j["repose"]["fit_hi"] = 0.5; }, "repose.fit_hi"},
+      {"repose_time_limit_negative", true, [](json& j) { j["repose"]["time_limit"] = -1; }, "repose.time_limit"},
+      {"repose_min_collapse_beyond_limit", true, [](json& j) { j["repose"]["time_limit"] = 0.1; j["repose"]["min_collapse_time"] = 0.2; }, "repose.min_collapse_time"},
+      {"repose_rest_trim_large", true, [](json& j) { j["repose"]["rest_trim"] = 0.5; }, "repose.rest_trim"},
+      {"repose_domain_too_short", true, [](json& j) { j["repose"]["domain_length"] = 0.04; }, "repose.domain_length"},
+  };
+  return v;
+}
+}  // namespace
+
+class BadTriaxialReposeJob : public ::testing::TestWithParam<Bad> {};
+
+TEST_P(BadTriaxialReposeJob, RejectedNamingTheField) {
+  json j = GetParam().repose ? repose_base() : triaxial_base();
+  GetParam().mutate(j);
+  const std::string msg = error_of(j);
+  ASSERT_FALSE(msg.empty()) << "accepted: " << j.dump();
+  EXPECT_NE(msg.find(GetParam().field), std::string::npos) << "message: " << msg;
+}
+
+INSTANTIATE_TEST_SUITE_P(TriaxialReposeScenes, BadTriaxialReposeJob, ::testing::ValuesIn(bad_cases()),
+                         [](const ::testing::TestParamInfo<Bad>& i) { return std::string(i.param.name); });
+
+TEST(TriaxialReposeScenes, BaseJobsAreValid) {
+  EXPECT_EQ(error_of(triaxial_base()), "");
+  EXPECT_EQ(error_of(repose_base()), "");
+}
+
+// ---- one quick task of each through the runner ----------------------------------
+
+namespace {
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path = fs::temp_directory_path() / ("demcal-jobs-" + std::to_string(getpid()) + "-" + info->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+};
+
+// Runs a one-task job with one worker and one engine thread; returns the task's
+// metrics by name, after checking it finished.
+std::map<std::string, double> run_one(const json& j, double& wall_s) {
+  TempDir d;
+  const Job job = parse(j);
+  EXPECT_EQ(job.tasks.size(), 1u);
+  demcal::db::Store store((d.path / "demcal.db").string());
+  demcal::jobs::RunOptions opt;
+  opt.workers = 1;
+  opt.out_dir = (d.path / "out").string();
+  std::ostringstream log;
+  opt.log = &log;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto sum = demcal::jobs::run_job(store, job, opt);
+  wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(sum.done, 1) << log.str();
+  EXPECT_EQ(sum.failed, 0) << log.str();
+  const auto rows = store.tasks(job.name);
+  EXPECT_EQ(rows.size(), 1u);
+  std::map<std::string, double> m;
+  if (rows.empty()) return m;
+  EXPECT_EQ(rows[0].status, "done") << rows[0].error;
+  for (const auto& [k, v] : store.metrics(rows[0].id)) m[k] = v;
+  const auto art = store.artifacts(rows[0].id);
+  EXPECT_EQ(art.size(), 1u);
+  if (!art.empty()) {
+    EXPECT_TRUE(fs::exists(art[0].second)) << art[0].second;
+  }
+  return m;
+}
+
+void expect_in(const std::map<std::string, double>& m, const std::string& name, double lo, double hi) {
+  const auto it = m.find(name);
+  ASSERT_NE(it, m.end()) << "no metric " << name;
+  EXPECT_TRUE(std::isfinite(it->second)) << name;
+  EXPECT_GT(it->second, lo) << name;
+  EXPECT_LT(it->second, hi) << name;
+}
+
+}  // namespace
+
+TEST(TriaxialReposeScenes, QuickTriaxialTaskRunsThroughTheRunner) {
+  json j = triaxial_base();
+  j["triaxial"] = {{"packing", "dense"}, {"confining_kpa", 100}, {"density_scale", 1e9}};
+  j.erase("grid");
+  j["fidelity"] = "quick";
+  j["threads"] = 1;
+  double wall = 0;
+  const auto m = run_one(j, wall);
+  std::printf("[ report   ] quick triaxial task: %.1f s wall (engine %.1f s), phi_peak %.2f, phi_cv %.2f, "
+              "eps_v_final %.4f, max I %.2e\n",
+              wall, m.count("wall_s") ? m.at("wall_s") : -1.0, m.count("phi_peak_deg") ? m.at("phi_peak_deg") : -1.0,
+              m.count("phi_cv_deg") ? m.at("phi_cv_deg") : -1.0, m.count("eps_v_final") ? m.at("eps_v_final") : 0.0,
+              m.count("max_inertial_number") ? m.at("max_inertial_number") : -1.0);
+  expect_in(m, "phi_peak_deg", 15, 60);
+  expect_in(m, "phi_cv_deg", 10, 50);
+  expect_in(m, "phi_cv_se_deg", -1e-12, 10);
+  expect_in(m, "phi_diff_deg", -5, 30);
+  expect_in(m, "eps1_at_peak", 0, 0.3 + 1e-9);
+  expect_in(m, "q_peak_pa", 1e4, 1e6);
+  expect_in(m, "porosity_initial", 0.3, 0.5);
+  expect_in(m, "porosity_final", 0.3, 0.55);
+  expect_in(m, "eps_v_final", -0.3, 0.1);
+  expect_in(m, "max_dilatancy_deg", -90, 90);
+  expect_in(m, "max_inertial_number", 0, 1);
+  expect_in(m, "coordination_final", 1, 12);
+  expect_in(m, "wall_s", 0, 600);
+  EXPECT_DOUBLE_EQ(m.at("particles"), 400);
+  EXPECT_NEAR(m.at("phi_diff_deg"), m.at("phi_peak_deg") - m.at("phi_cv_deg"), 1e-9);
+}
+
+TEST(TriaxialReposeScenes, QuickReposeTaskRunsThroughTheRunner) {
+  json j = repose_base();
+  j["repose"] = json::object();
+  j.erase("grid");
+  j["fidelity"] = "quick";
+  j["threads"] = 1;
+  j["seed"] = 1;  // seed 7 at theta 30, eta 0.1 keeps a grain rolling past 3 s: not_settled
+  double wall = 0;
+  const auto m = run_one(j, wall);
+  std::printf("[ report   ] quick repose task: %.1f s wall (engine %.1f s), %g grains, repose %.2f +- %.2f, "
+              "steepest %.2f, runout ratio %.2f, rest at %.3f s\n",
+              wall, m.count("wall_s") ? m.at("wall_s") : -1.0, m.count("particles") ? m.at("particles") : -1.0,
+              m.count("repose_deg") ? m.at("repose_deg") : -1.0,
+              m.count("repose_fit_err_deg") ? m.at("repose_fit_err_deg") : -1.0,
+              m.count("steepest_deg") ? m.at("steepest_deg") : -1.0, m.count("runout_ratio") ? m.at("runout_ratio") : -1.0,
+              m.count("time_to_rest_s") ? m.at("time_to_rest_s") : -1.0);
+  expect_in(m, "repose_deg", 5, 50);
+  expect_in(m, "repose_fit_err_deg", -1e-12, 10);
+  expect_in(m, "steepest_deg", 5, 70);
+  expect_in(m, "runout_m", 0, 0.2);
+  expect_in(m, "runout_ratio", 0, 10);
+  expect_in(m, "final_height_m", 0.002, 0.02);
+  expect_in(m, "time_to_rest_s", 0, 1.5);
+  expect_in(m, "wall_s", 0, 600);
+}
