@@ -540,7 +540,10 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       const double de1 = s.rows[j][c_e1] - s.rows[i][c_e1];
       if (de1 < cfg.dilatancy_window - 1e-9) continue;
       const double dev = s.rows[j][c_ev] - s.rows[i][c_ev];
-      const double x = -dev / (2.0 * de1 - dev);
+      // sin(psi) = -dev / (2 de1 - dev); a contraction faster than 2 de1 (a collapse)
+      // leaves the formula's domain: it is the most contractive angle, not +90.
+      const double denom = 2.0 * de1 - dev;
+      const double x = denom > 0.0 ? -dev / denom : -1.0;
       res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))));
       break;
     }
