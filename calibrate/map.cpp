@@ -1,6 +1,7 @@
 #include "map.hpp"
 
 #include "jobs/job_error.hpp"
+#include "jobs/series_plot.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +11,6 @@
 #include <map>
 #include <sstream>
 #include <stdexcept>
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace demcal::calibrate {
@@ -18,12 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// As jobs/series_plot.cpp: single-quoted gnuplot strings, gnuplot run without a shell.
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
-  return out + "'";
-}
+std::string quoted(const std::string& s) { return jobs::gnuplot_quoted(s); }
 
 std::string extension_of(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
@@ -33,22 +28,10 @@ std::string extension_of(const std::string& path) {
 
 std::string terminal_line(const std::string& ext) {
   if (ext == ".svg") return "set terminal svg size 900,700 dynamic enhanced\n";
-  return "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) { set terminal pngcairo size 900,700 } "
-         "else { set terminal png size 900,700 }\n";
+  return jobs::gnuplot_png_terminal(900, 700);
 }
 
-void run_gnuplot(const std::string& script) {
-  const pid_t pid = fork();
-  if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
-  if (pid == 0) {
-    execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  int st = 0;
-  waitpid(pid, &st, 0);
-  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
-  if (WEXITSTATUS(st) != 0) throw std::runtime_error("gnuplot failed (exit status " + std::to_string(WEXITSTATUS(st)) + ")");
-}
+void run_gnuplot(const std::string& script) { jobs::run_gnuplot_script(script); }
 
 std::size_t nearest(const std::vector<double>& axis, double x) {
   std::size_t best = 0;

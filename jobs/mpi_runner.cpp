@@ -1,6 +1,7 @@
 #include "mpi_runner.hpp"
 
 #include "liveness.hpp"
+#include "stop_signal.hpp"
 #include "progress.hpp"
 #include "worker.hpp"
 
@@ -34,27 +35,6 @@ constexpr int kTagStop = 11;  // empty: leave
 
 bool g_dismissed = false;  // rank 0 told every worker to stop
 
-volatile std::sig_atomic_t g_stop = 0;
-extern "C" void on_mpi_stop_signal(int sig) { g_stop = sig; }
-
-class SignalGuard {
- public:
-  SignalGuard() {
-    g_stop = 0;
-    struct sigaction sa {};
-    sa.sa_handler = on_mpi_stop_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, &old_int_);
-    sigaction(SIGTERM, &sa, &old_term_);
-  }
-  ~SignalGuard() {
-    sigaction(SIGINT, &old_int_, nullptr);
-    sigaction(SIGTERM, &old_term_, nullptr);
-  }
-
- private:
-  struct sigaction old_int_ {}, old_term_ {};
-};
 
 void check(int rc, const char* what) {
   if (rc == MPI_SUCCESS) return;
@@ -178,7 +158,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   if (size < 2)
     throw std::runtime_error(
         "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
-  SignalGuard guard;
+  StopSignalGuard guard;
   const std::string token = runner_token();
   const std::int64_t job_id =
       store.put_job(job.name, job.spec.dump(), tasks_to_record(job, options.shard), options.shard.active());
@@ -248,7 +228,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   };
 
   for (;;) {
-    if (g_stop) break;
+    if (stop_signal()) break;
     bool got = false;
     for (;;) {  // drain what has arrived
       MPI_Status st{};
@@ -355,10 +335,10 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
 
-  if (g_stop) {
+  if (stop_signal()) {
     // Plain mpirun ends the whole job with SIGTERM when any rank dies (see
     // docs/scaling.md): what was running goes back to pending for the next run.
-    log << "\n" << (g_stop == SIGINT ? "interrupted" : "terminated (SIGTERM: mpirun ends the job this way when a rank dies)")
+    log << "\n" << (stop_signal() == SIGINT ? "interrupted" : "terminated (SIGTERM: mpirun ends the job this way when a rank dies)")
         << ": running task(s) go back to the queue\n";
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];

@@ -1,6 +1,7 @@
 #include "runner.hpp"
 
 #include "liveness.hpp"
+#include "stop_signal.hpp"
 #include "progress.hpp"
 #include "worker.hpp"
 
@@ -19,28 +20,6 @@
 namespace demcal::jobs {
 namespace {
 
-volatile std::sig_atomic_t g_stop = 0;
-extern "C" void on_stop_signal(int sig) { g_stop = sig; }
-
-// Installs the SIGINT/SIGTERM handlers for the duration of a run.
-class SignalGuard {
- public:
-  SignalGuard() {
-    g_stop = 0;
-    struct sigaction sa {};
-    sa.sa_handler = on_stop_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, &old_int_);
-    sigaction(SIGTERM, &sa, &old_term_);
-  }
-  ~SignalGuard() {
-    sigaction(SIGINT, &old_int_, nullptr);
-    sigaction(SIGTERM, &old_term_, nullptr);
-  }
-
- private:
-  struct sigaction old_int_ {}, old_term_ {};
-};
 
 std::string signal_name(int sig) {
   switch (sig) {
@@ -228,7 +207,7 @@ void Runner::stop_all() {
 }
 
 RunSummary Runner::run() {
-  SignalGuard guard;
+  StopSignalGuard guard;
   prepare();
   RunSummary s;
   const Counts start = counts();
@@ -236,8 +215,8 @@ RunSummary Runner::run() {
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
   auto last_refresh = std::chrono::steady_clock::now();
-  while (!g_stop) {
-    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !g_stop) {
+  while (!stop_signal()) {
+    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
       const db::TaskRow row = queue_.front();
       queue_.pop_front();
       if (store_.claim(row.id, token_)) launch(row);
@@ -259,8 +238,8 @@ RunSummary Runner::run() {
     progress_.update(counts_, eta());
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  if (g_stop) {
-    *opt_.log << "\n" << (g_stop == SIGINT ? "interrupted" : "terminated") << ": stopping " << running_.size()
+  if (stop_signal()) {
+    *opt_.log << "\n" << (stop_signal() == SIGINT ? "interrupted" : "terminated") << ": stopping " << running_.size()
               << " running task(s); they will be retried by the next run\n";
     stop_all();
     s.interrupted = true;

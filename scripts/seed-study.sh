@@ -3,7 +3,7 @@
 # examples/seed-study/, draws the Fig. 2.11 maps, fits the seed's targets and writes
 # docs/seed-study.md, every number beside the seed's.
 #
-#   scripts/seed-study.sh [--db FILE] [--workers N] [--out DIR] [--skip-run]
+#   [DEMCAL=bin] scripts/seed-study.sh [--db FILE] [--workers N] [--out DIR] [--skip-run]
 #
 # Resumable: tasks already in the database are not run again, so an interrupted
 # study continues where it stopped. The seed's values below are transcribed from
@@ -24,8 +24,11 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 
-bash "$ROOT/scripts/setup.sh"
-DEMCAL="${DEMCAL:-$ROOT/build/cli/demcal}"
+# DEMCAL=/path/to/demcal uses that binary as it is; otherwise set up and build.
+if [[ -z "${DEMCAL:-}" ]]; then
+  bash "$ROOT/scripts/setup.sh"
+  DEMCAL="$ROOT/build/cli/demcal"
+fi
 JOBS="$ROOT/examples/seed-study"
 mkdir -p "$OUT"
 REPORT="$OUT/README.md"
@@ -127,6 +130,14 @@ wall_total=$(col "$tmp/seed-dense-grid.csv" wall_s | awk '{ s += $1 } END { prin
   echo "Mohr–Coulomb envelope over p0 (\`demcal envelope\`), dense:"
   echo
   echo '```'; cat "$OUT/envelope_dense.txt"; echo '```'
+  echo
+  echo "With two confining pressures the two-parameter line has no degree of freedom"
+  echo "left, so φ and c carry no standard error (nan); the zero-cohesion angle does."
+  echo "The seed's Mohr–Coulomb angles at θ = 30°, η = 0.1: φ_peak 41.8°, φ_cv 32.6°."
+  echo
+  echo "Loose:"
+  echo
+  echo '```'; cat "$OUT/envelope_loose.txt"; echo '```'
   echo
   echo "## Angle of repose over η, θ = 30° (Fig. 2.15)"
   echo

@@ -1,0 +1,33 @@
+#include "stop_signal.hpp"
+
+#include <csignal>
+#include <signal.h>
+
+namespace demcal::jobs {
+namespace {
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void on_stop_signal(int sig) { g_stop = sig; }
+}  // namespace
+
+struct StopSignalGuard::Saved {
+  struct sigaction old_int {}, old_term {};
+};
+
+StopSignalGuard::StopSignalGuard() : saved_(new Saved) {
+  g_stop = 0;
+  struct sigaction sa {};
+  sa.sa_handler = on_stop_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, &saved_->old_int);
+  sigaction(SIGTERM, &sa, &saved_->old_term);
+}
+
+StopSignalGuard::~StopSignalGuard() {
+  sigaction(SIGINT, &saved_->old_int, nullptr);
+  sigaction(SIGTERM, &saved_->old_term, nullptr);
+  delete saved_;
+}
+
+int stop_signal() { return g_stop; }
+
+}  // namespace demcal::jobs

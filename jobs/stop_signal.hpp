@@ -1,0 +1,23 @@
+#pragma once
+// SIGINT/SIGTERM as a polite stop request for a run loop (local runner and MPI
+// rank 0): the handler only records the signal; the loop finishes cleanly.
+
+namespace demcal::jobs {
+
+// Installs the handlers for its lifetime (and clears any earlier request).
+class StopSignalGuard {
+ public:
+  StopSignalGuard();
+  ~StopSignalGuard();
+  StopSignalGuard(const StopSignalGuard&) = delete;
+  StopSignalGuard& operator=(const StopSignalGuard&) = delete;
+
+ private:
+  struct Saved;
+  Saved* saved_;
+};
+
+// The signal received while a guard was installed, 0 if none.
+int stop_signal();
+
+}  // namespace demcal::jobs
