@@ -362,10 +362,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
   progress.finish();
   const Counts c = counts();
-  s.total = c.total;
-  s.done = c.done;
-  s.failed = c.failed;
-  s.unfinished = c.total - c.done - c.failed;
+  record_final_counts(c, s);
   s.ran = ran;
   return s;
 }

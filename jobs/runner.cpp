@@ -246,10 +246,7 @@ RunSummary Runner::run() {
   }
   progress_.finish();
   const Counts c = counts();
-  s.total = c.total;
-  s.done = c.done;
-  s.failed = c.failed;
-  s.unfinished = c.total - c.done - c.failed;
+  record_final_counts(c, s);
   s.ran = ran_;
   return s;
 }
@@ -271,6 +268,13 @@ std::string task_output_dir(const Job& job, const RunOptions& options) {
   if (options.shard.active())
     dir /= "shard-" + std::to_string(options.shard.index) + "-of-" + std::to_string(options.shard.count);
   return dir.string();
+}
+
+void record_final_counts(const Counts& c, RunSummary& s) {
+  s.total = c.total;
+  s.done = c.done;
+  s.failed = c.failed;
+  s.unfinished = c.total - c.done - c.failed;
 }
 
 std::string describe_task(const Job& job, std::size_t index) {

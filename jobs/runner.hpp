@@ -3,6 +3,7 @@
 // or abort fails that task only. Only this (parent) process writes the store.
 #include "db/store.hpp"
 #include "job_spec.hpp"
+#include "progress.hpp"
 #include "shard.hpp"
 
 #include <ostream>
@@ -36,6 +37,8 @@ RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 std::vector<db::NewTask> tasks_to_record(const Job& job, const Shard& shard);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
+// The job's task counts at the end of a run, into the summary.
+void record_final_counts(const Counts& c, RunSummary& s);
 // "task #3 (dt_factor=0.1)" for progress lines.
 std::string describe_task(const Job& job, std::size_t index);
 

@@ -66,6 +66,15 @@ col() {
 }
 fmt() { awk -v x="$1" 'BEGIN { if (x == "") printf "failed"; else printf "%.1f", x }'; }
 diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else printf "%+.1f", a - b }'; }
+# table_row LABEL THETA ETA SEED_PEAK SEED_CV: one row of Table 2.2 or 2.3 from the
+# dense grid's first packing, beside the seed's values.
+table_row() {
+  local row pk cv se
+  row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg |
+        awk -F'\t' -v t="$2" -v e="$3" '$1 == t && $2 == e && $3 == 1' | head -1)
+  pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row")
+  echo "| $1 | $4° | $(fmt "$pk")° | $(diff_of "$pk" "$4") | $5° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" "$5") |"
+}
 
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
@@ -91,10 +100,7 @@ wall_total=$(for j in seed-dense-grid seed-replicas seed-dense-loose seed-repose
   seed_pk=(35.7 38.6 40.4 41.4 41.5 42.6); seed_cv=(29.0 31.3 32.0 32.6 32.6 32.6)
   i=0
   for th in 15 20 25 30 35 40; do
-    row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg |
-          awk -F'\t' -v t=$th '$1 == t && $2 == 0.1 && $3 == 1' | head -1)
-    pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row")
-    echo "| $th° | ${seed_pk[$i]}° | $(fmt "$pk")° | $(diff_of "$pk" ${seed_pk[$i]}) | ${seed_cv[$i]}° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" ${seed_cv[$i]}) |"
+    table_row "$th°" $th 0.1 ${seed_pk[$i]} ${seed_cv[$i]}
     i=$((i + 1))
   done
   echo
@@ -105,10 +111,7 @@ wall_total=$(for j in seed-dense-grid seed-replicas seed-dense-loose seed-repose
   seed_pk=(35.0 41.4 45.5 47.2); seed_cv=(27.6 32.6 37.9 40.9)
   i=0
   for eta in 0 0.1 0.3 0.5; do
-    row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg |
-          awk -F'\t' -v e=$eta '$1 == 30 && $2 == e && $3 == 1' | head -1)
-    pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row")
-    echo "| $eta | ${seed_pk[$i]}° | $(fmt "$pk")° | $(diff_of "$pk" ${seed_pk[$i]}) | ${seed_cv[$i]}° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" ${seed_cv[$i]}) |"
+    table_row "$eta" 30 $eta ${seed_pk[$i]} ${seed_cv[$i]}
     i=$((i + 1))
   done
   echo

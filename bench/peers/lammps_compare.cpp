@@ -6,6 +6,7 @@
 //   bench_lammps_compare PACK.bin --steps S --lammps-dir DIR
 #include "engine/measure.hpp"
 #include "engine/world.hpp"
+#include "../pack_file.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -15,32 +16,7 @@
 #include <vector>
 
 using namespace demcal::engine;
-
-namespace {
-
-// Same format as bench/engine_throughput.cpp's save_pack.
-bool load_pack(const std::string& file, Particles& p, std::vector<Wall>& walls) {
-  std::FILE* f = std::fopen(file.c_str(), "rb");
-  if (!f) return false;
-  std::size_t n = 0;
-  bool ok = std::fread(&n, sizeof n, 1, f) == 1;
-  for (std::size_t i = 0; ok && i < n; ++i) {
-    double rec[5];
-    ok = std::fread(rec, sizeof rec, 1, f) == 1;
-    if (ok) {
-      const std::size_t k = p.add(Vec3(rec[0], rec[1], rec[2]), rec[3], 1.0);
-      p.m[k] = rec[4];
-      p.inv_m[k] = 1.0 / rec[4];
-      p.inv_i[k] = 1.0 / (0.4 * rec[4] * rec[3] * rec[3]);
-    }
-  }
-  walls = box_walls(Vec3::Zero(), Vec3::Ones());
-  for (auto& w : walls) ok = ok && std::fread(w.point.data(), sizeof(double), 3, f) == 3;
-  std::fclose(f);
-  return ok;
-}
-
-}  // namespace
+using demcal::bench::load_pack;
 
 int main(int argc, char** argv) {
   std::string pack, dir = ".";

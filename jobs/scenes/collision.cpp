@@ -2,6 +2,7 @@
 #include "../job_error.hpp"
 #include "../material_params.hpp"
 #include "../scene_registry.hpp"
+#include "../scene_resolve.hpp"
 
 #include "engine/errors.hpp"
 #include "engine/scenes/collision.hpp"
@@ -57,9 +58,7 @@ std::int64_t default_steps(const std::string& fidelity) {
 }
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
-  if (p.contains("dt") && p.contains("dt_factor"))
-    throw JobError("collision.dt", "give dt or dt_factor, not both");
-  if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", 0.2));
+  resolve_time_step(p, kSection, 0.2);
   if (p.contains("duration")) {
     // The engine derives steps and sampling from the duration and dt.
     for (const char* k : {"steps", "sample_every"})
@@ -71,14 +70,11 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     if (p["sample_every"].get<std::int64_t>() > steps)
       throw JobError("collision.sample_every", "must not exceed collision.steps (" + std::to_string(steps) + ")");
   }
-  if (p["d_min"].get<double>() > p["d_max"].get<double>())
-    throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
+  check_diameters(p);
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {
-    std::string reason = e.what();
-    reason = reason.substr(std::min(reason.size(), e.field().size() + 2));
-    throw JobError(job_path_of(e.field(), kSection), reason);
+    throw_as_job_error(e, job_path_of(e.field(), kSection));
   }
 }
 

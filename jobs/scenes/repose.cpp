@@ -2,6 +2,7 @@
 #include "../job_error.hpp"
 #include "../material_params.hpp"
 #include "../scene_registry.hpp"
+#include "../scene_resolve.hpp"
 
 #include "engine/errors.hpp"
 #include "engine/scenes/repose.hpp"
@@ -117,17 +118,14 @@ std::string job_path(const std::string& field) {
 std::string num(const nlohmann::json& v) { return v.dump(); }
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
-  if (p.contains("dt") && p.contains("dt_factor"))
-    throw JobError("repose.dt", "give dt or dt_factor, not both");
-  if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", engine::ReposeConfig{}.dt_factor));
+  resolve_time_step(p, kSection, engine::ReposeConfig{}.dt_factor);
   const Preset pre = preset(fidelity);
   if (!p.contains("column_width")) p["column_width"] = pre.column_width;
   if (!p.contains("column_height")) p["column_height"] = pre.column_height;
   if (!p.contains("depth_diameters")) p["depth_diameters"] = pre.depth_diameters;
   if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;
   if (!p.contains("time_limit")) p["time_limit"] = pre.time_limit;
-  if (p["d_min"].get<double>() > p["d_max"].get<double>())
-    throw JobError("material.diameter", "min (" + num(p["d_min"]) + ") must not exceed max (" + num(p["d_max"]) + ")");
+  check_diameters(p);
   if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>()))
     throw JobError("repose.fit_hi", "must exceed repose.fit_lo (" + num(p["fit_lo"]) + "), got " + num(p["fit_hi"]));
   if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>())
@@ -135,9 +133,7 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {
-    std::string reason = e.what();
-    reason = reason.substr(std::min(reason.size(), e.field().size() + 2));
-    throw JobError(job_path(e.field()), reason);
+    throw_as_job_error(e, job_path(e.field()));
   }
 }
 

@@ -2,6 +2,7 @@
 #include "../job_error.hpp"
 #include "../material_params.hpp"
 #include "../scene_registry.hpp"
+#include "../scene_resolve.hpp"
 
 #include "engine/errors.hpp"
 #include "engine/scenes/triaxial.hpp"
@@ -130,17 +131,14 @@ std::string job_path(const std::string& field) {
 std::string num(const nlohmann::json& v) { return v.dump(); }
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
-  if (p.contains("dt") && p.contains("dt_factor"))
-    throw JobError("triaxial.dt", "give dt or dt_factor, not both");
+  resolve_time_step(p, kSection, engine::TriaxialConfig{}.dt_factor);
   if (p.contains("density_scale") && p.contains("scaled_density"))
     throw JobError("triaxial.density_scale", "give density_scale or scaled_density, not both");
-  if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", engine::TriaxialConfig{}.dt_factor));
   if (!p.contains("density_scale")) p.emplace("scaled_density", p.value("scaled_density", engine::TriaxialConfig{}.scaled_density));
   const Preset pre = preset(fidelity);
   if (!p.contains("particles")) p["particles"] = pre.particles;
   if (!p.contains("strain_rate")) p["strain_rate"] = pre.strain_rate;
-  if (p["d_min"].get<double>() > p["d_max"].get<double>())
-    throw JobError("material.diameter", "min (" + num(p["d_min"]) + ") must not exceed max (" + num(p["d_max"]) + ")");
+  check_diameters(p);
 
   // Critical-state window: the last third of the shear unless given.
   const double eps1 = p["axial_strain"].get<double>();
@@ -158,9 +156,7 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {
-    std::string reason = e.what();
-    reason = reason.substr(std::min(reason.size(), e.field().size() + 2));
-    throw JobError(job_path(e.field()), reason);
+    throw_as_job_error(e, job_path(e.field()));
   }
 }
 

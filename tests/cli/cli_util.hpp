@@ -41,9 +41,10 @@ inline std::string slurp(const std::string& p) {
 
 inline void write(const std::string& p, const std::string& text) { std::ofstream(p, std::ios::trunc) << text; }
 
-// Starts demcal with args (stdout/stderr to files in dir); returns the pid.
-inline pid_t spawn(const std::vector<std::string>& args, const std::string& dir,
-                   const std::map<std::string, std::string>& env = {}, const std::string& tag = "out") {
+// Starts argv[0] (a path, or a name found on PATH) with the rest of argv in dir,
+// stdout/stderr to files <tag>.stdout/.stderr there; returns the pid.
+inline pid_t spawn_program(const std::vector<std::string>& argv, const std::string& dir,
+                           const std::map<std::string, std::string>& env = {}, const std::string& tag = "out") {
   const std::string out = dir + "/" + tag + ".stdout", err = dir + "/" + tag + ".stderr";
   const pid_t pid = fork();
   if (pid == 0) {
@@ -53,14 +54,21 @@ inline pid_t spawn(const std::vector<std::string>& args, const std::string& dir,
     dup2(e, 2);
     for (const auto& [k, v] : env) setenv(k.c_str(), v.c_str(), 1);
     if (chdir(dir.c_str()) != 0) _exit(126);
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(DEMCAL_BIN));
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    execv(DEMCAL_BIN, argv.data());
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    execvp(args[0], args.data());
     _exit(127);
   }
   return pid;
+}
+
+// Starts demcal with args (stdout/stderr to files in dir); returns the pid.
+inline pid_t spawn(const std::vector<std::string>& args, const std::string& dir,
+                   const std::map<std::string, std::string>& env = {}, const std::string& tag = "out") {
+  std::vector<std::string> argv{DEMCAL_BIN};
+  argv.insert(argv.end(), args.begin(), args.end());
+  return spawn_program(argv, dir, env, tag);
 }
 
 struct Result {

@@ -13,22 +13,7 @@ namespace demcal::test {
 // Runs argv[0] (a path) with args; stdout/stderr to files in dir, as spawn() does.
 inline Result run_program(const std::vector<std::string>& argv, const std::string& dir,
                           const std::map<std::string, std::string>& env = {}, const std::string& tag = "out") {
-  const std::string out = dir + "/" + tag + ".stdout", err = dir + "/" + tag + ".stderr";
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(o, 1);
-    dup2(e, 2);
-    for (const auto& [k, v] : env) setenv(k.c_str(), v.c_str(), 1);
-    if (chdir(dir.c_str()) != 0) _exit(126);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    execvp(args[0], args.data());
-    _exit(127);
-  }
-  return finish(pid, dir, tag);
+  return finish(spawn_program(argv, dir, env, tag), dir, tag);
 }
 
 inline Result run_bash(const std::string& script, const std::string& dir, const std::map<std::string, std::string>& env = {}) {

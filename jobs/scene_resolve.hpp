@@ -1,0 +1,22 @@
+#pragma once
+// What every scene's resolve() shares: the time-step pair, the diameter range and
+// the engine's own validation turned into a job-file error.
+#include "engine/errors.hpp"
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace demcal::jobs {
+
+// dt and dt_factor exclude each other ("<section>.dt"); with neither, dt_factor
+// takes `default_factor`.
+void resolve_time_step(nlohmann::json& params, const std::string& section, double default_factor);
+
+// material.diameter: min must not exceed max.
+void check_diameters(const nlohmann::json& params);
+
+// Rethrows the engine's ConfigError as a JobError at `job_path` (the job-file
+// spelling of e.field()), keeping only the reason.
+[[noreturn]] void throw_as_job_error(const engine::ConfigError& e, const std::string& job_path);
+
+}  // namespace demcal::jobs
