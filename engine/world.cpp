@@ -1,9 +1,11 @@
 #include "world.hpp"
 
+#include "contact_batch.hpp"
 #include "errors.hpp"
 #include "timestep.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <sstream>
 #ifdef _OPENMP
@@ -26,6 +28,13 @@ int thread_id() {
 #else
   return 0;
 #endif
+}
+
+double seconds_since(std::chrono::steady_clock::time_point& t) {
+  const auto now = std::chrono::steady_clock::now();
+  const double s = std::chrono::duration<double>(now - t).count();
+  t = now;
+  return s;
 }
 
 void require_finite_positive(double v, const char* field) {
@@ -99,12 +108,51 @@ void World::rotate(const Mat3& q, const Vec3& centre) {
   if (nl_.start.size() == p_.size() + 1) nl_.build(p_, dom_, skin_, opt_.threads);
 }
 
+namespace {
+
+// Scatters a finished batch: forces and torques onto the grains, history back into
+// the list, the largest overlap into the thread's accumulator.
+void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, ThreadAcc& acc) {
+  // Lanes come row by row: sum each row's force and torque on i in registers and
+  // store once, instead of a load-add-store chain through the same address.
+  int row = b.count > 0 ? b.i[0] : 0;
+  Vec3 fi = Vec3::Zero(), ti = Vec3::Zero();
+  for (int l = 0; l < b.count; ++l) {
+    const int i = b.i[l], j = b.j[l], e = b.e[l];
+    if (i != row) {
+      F[row] += fi;
+      T[row] += ti;
+      fi.setZero();
+      ti.setZero();
+      row = i;
+    }
+    const Vec3 f(b.fx[l], b.fy[l], b.fz[l]);
+    fi += f;
+    F[j] -= f;
+    ti += Vec3(b.tix[l], b.tiy[l], b.tiz[l]);
+    T[j] += Vec3(b.tjx[l], b.tjy[l], b.tjz[l]);
+    FS[e] = Vec3(b.fsx[l], b.fsy[l], b.fsz[l]);
+    MR[e] = Vec3(b.mrx[l], b.mry[l], b.mrz[l]);
+    const double rmin = std::min(b.ri[l], b.rj[l]);
+    if (b.delta[l] > acc.max_overlap * rmin) {  // divide only for a new maximum
+      acc.max_overlap = b.delta[l] / rmin;
+      acc.max_overlap_i = i;
+    }
+  }
+  if (b.count > 0) {
+    F[row] += fi;
+    T[row] += ti;
+  }
+}
+
+}  // namespace
+
+// Pair contacts of rows [begin, end): touching pairs are packed lane by lane into a
+// batch, the law runs over the batch (contact_batch.hpp), results are scattered.
 template <bool Periodic>
 void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   const double dt = opt_.dt;
   const ContactParams law = law_;
-  const bool frictional = law.ks > 0.0;
-  const bool rolling = law.rolling();
   const Vec3* X = p_.x.data();
   const Vec3* V = p_.v.data();
   const Vec3* W = p_.w.data();
@@ -113,17 +161,19 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   Vec3* FS = nl_.fs.data();
   Vec3* MR = nl_.mr.data();
   std::uint8_t* TOUCH = nl_.touching.data();
+  PairBatch b;
+  int lanes = 0;  // a local, not b.count: the packing loop keeps it in a register
 
   for (int i = begin; i < end; ++i) {
     const Vec3 xi = X[i], vi = V[i], wi = W[i];
     const double ri = R[i];
-    Vec3 fi = Vec3::Zero(), ti = Vec3::Zero();
     for (int e = nl_.start[i]; e < nl_.start[i + 1]; ++e) {
       const int j = J[e];
       Vec3 d = X[j] - xi;
       if constexpr (Periodic) dom_.min_image(d);
       const double dist2 = d.squaredNorm();
-      const double rsum = ri + R[j];
+      const double rj = R[j];
+      const double rsum = ri + rj;
       if (dist2 >= rsum * rsum) {
         if (TOUCH[e]) {
           FS[e].setZero();
@@ -133,29 +183,45 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
         continue;
       }
       TOUCH[e] = 1;
-      const double dist = std::sqrt(dist2);
-      ContactKinematics k;
-      k.n = d * (1.0 / dist);  // one division, not three
-      k.delta = rsum - dist;
-      const double ai = ri - 0.5 * k.delta, aj = R[j] - 0.5 * k.delta;
-      k.v_rel = vi - V[j] + (ai * wi + aj * W[j]).cross(k.n);
-      k.w_rel = wi - W[j];
-      k.spin_n = 0.5 * (wi + W[j]).dot(k.n);
-      k.r_roll = 0.5 * rsum;
-      const ContactResponse c = apply_contact_law(law, dt, k, FS[e], MR[e], frictional, rolling);
-      const Vec3 arm_cross = k.n.cross(c.fs);
-      fi += c.force;
-      F[j] -= c.force;
-      ti += ai * arm_cross + MR[e];
-      T[j] += aj * arm_cross - MR[e];
-      const double rmin = std::min(ri, R[j]);
-      if (k.delta > acc.max_overlap * rmin) {  // divide only for a new maximum
-        acc.max_overlap = k.delta / rmin;
-        acc.max_overlap_i = i;
+      const int l = lanes++;
+      b.i[l] = i;
+      b.j[l] = j;
+      b.e[l] = e;
+      b.dx[l] = d.x();
+      b.dy[l] = d.y();
+      b.dz[l] = d.z();
+      b.d2[l] = dist2;
+      b.ri[l] = ri;
+      b.rj[l] = rj;
+      const Vec3 vr = vi - V[j];
+      b.vx[l] = vr.x();
+      b.vy[l] = vr.y();
+      b.vz[l] = vr.z();
+      b.wix[l] = wi.x();
+      b.wiy[l] = wi.y();
+      b.wiz[l] = wi.z();
+      const Vec3& wj = W[j];
+      b.wjx[l] = wj.x();
+      b.wjy[l] = wj.y();
+      b.wjz[l] = wj.z();
+      b.fsx[l] = FS[e].x();
+      b.fsy[l] = FS[e].y();
+      b.fsz[l] = FS[e].z();
+      b.mrx[l] = MR[e].x();
+      b.mry[l] = MR[e].y();
+      b.mrz[l] = MR[e].z();
+      if (lanes == kPairBatch) {
+        b.count = lanes;
+        pair_batch_law(law, dt, b);
+        scatter_batch(b, F, T, FS, MR, acc);
+        lanes = 0;
       }
     }
-    F[i] += fi;
-    T[i] += ti;
+  }
+  if (lanes > 0) {
+    b.count = lanes;
+    pair_batch_law(law, dt, b);
+    scatter_batch(b, F, T, FS, MR, acc);
   }
 }
 
@@ -231,8 +297,10 @@ void World::wall_forces(double& max_overlap, long& max_overlap_i) {
 }
 
 void World::compute_forces() {
+  auto clock = std::chrono::steady_clock::now();
   if (nl_.needs_rebuild(p_, dom_, skin_, opt_.threads)) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
+  times_.neighbor += seconds_since(clock);
   const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
   std::vector<ThreadAcc> acc(nt);
@@ -276,7 +344,9 @@ void World::compute_forces() {
       max_overlap_particle_ = a.max_overlap_i;
     }
   }
+  times_.pairs += seconds_since(clock);
   wall_forces(max_overlap_ratio_, max_overlap_particle_);
+  times_.walls += seconds_since(clock);
 
   // Gravity and (preparation only) local damping act on the total force.
   const Vec3 g = opt_.gravity;
@@ -295,10 +365,12 @@ void World::compute_forces() {
     }
   }
   forces_valid_ = true;
+  times_.integrate += seconds_since(clock);
 }
 
 void World::step() {
   if (!forces_valid_) compute_forces();
+  auto clock = std::chrono::steady_clock::now();
   const int n = static_cast<int>(p_.size());
   const double dt = opt_.dt, half = 0.5 * dt;
   const bool periodic = dom_.any_periodic();
@@ -317,8 +389,10 @@ void World::step() {
     if (periodic) dom_.wrap(p_.x[i]);
   }
   for (auto& w : walls_) w.point += dt * w.velocity;
+  times_.integrate += seconds_since(clock);
 
   compute_forces();
+  clock = std::chrono::steady_clock::now();
 
   bool finite = true;
 #pragma omp parallel for schedule(static) num_threads(opt_.threads) reduction(&& : finite)
@@ -335,6 +409,7 @@ void World::step() {
 
   ++step_;
   time_ += dt;
+  times_.integrate += seconds_since(clock);
   if (!finite) check_finite_and_overlap();
   if (max_overlap_ratio_ > opt_.max_overlap_fraction) check_finite_and_overlap();
   if (guard_tol_ >= 0.0 && step_ % guard_interval_ == 0) check_energy();

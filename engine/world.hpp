@@ -23,6 +23,15 @@ struct WorldOptions {
   bool allow_unstable_dt = false;  // for stability studies only: skip the critical-step refusal
 };
 
+// Wall-clock seconds spent in each phase of the step since the world was made:
+// what a profile of a run costs nothing to read.
+struct PhaseTimes {
+  double neighbor = 0.0;   // rebuild check, list rebuilds, wall candidate lists
+  double pairs = 0.0;      // grain-grain contact law, force reduction across threads
+  double walls = 0.0;      // grain-wall contacts
+  double integrate = 0.0;  // velocity Verlet passes, gravity, damping, checks
+};
+
 // One contact as measurements see it (recomputed from positions and history).
 struct ContactView {
   int i;
@@ -84,6 +93,7 @@ class World {
   double skin() const { return skin_; }
   double wall_work() const { return wall_work_; }  // work done on the grains by moving walls [J]
   double max_overlap_ratio() const { return max_overlap_ratio_; }  // of the last force evaluation
+  const PhaseTimes& phase_times() const { return times_; }
 
   // Calls f(const ContactView&) for every live contact, pairs then walls. Serial.
   template <class F>
@@ -127,6 +137,8 @@ class World {
   double wall_work_ = 0.0;
   double max_overlap_ratio_ = 0.0;
   long max_overlap_particle_ = -1;
+
+  PhaseTimes times_;
 
   double guard_tol_ = -1.0;
   long guard_interval_ = 100;
