@@ -1,6 +1,7 @@
 #pragma once
-// The seed's contact law (Eqs. 2.3-2.6), shared by sphere-sphere and sphere-wall
-// contacts. Everything here is inline: it runs once per contact per step.
+// The seed's contact law (Eqs. 2.3-2.6), one contact at a time: grain-wall contacts
+// run it, and it is the reference the batched pair kernel (contact_batch.hpp, what
+// grain-grain contacts run) is tested against lane by lane.
 //
 //  normal      Fn = Kn * delta along the contact normal, repulsive only;
 //  tangential  incremental spring Fs kept in the contact history, carried into the
