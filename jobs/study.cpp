@@ -857,8 +857,9 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
       for (std::size_t m = 0; m < nm; ++m)
         rec << (m ? ", " : "") << short_metric(d.metrics[m]) << " error " << fmt(best->error[m], 2) << " +/- "
             << fmt(best->sd[m], 2) << " deg";
-      rec << "; " << fmt(best->work / 1e6, 3) << "e6 particle-steps, " << fmt(best->wall_s, 3) << " s, against "
-          << fmt(ref->work / 1e6, 3) << "e6 and " << fmt(ref->wall_s, 3) << " s for the reference " << ref_label
+      rec << "; " << std::llround(best->work / 1e6) << " million particle-steps, " << fmt(best->wall_s, 4)
+          << " s, against " << std::llround(ref->work / 1e6) << " million and " << fmt(ref->wall_s, 4)
+          << " s for the reference " << ref_label
           << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance)
           << " deg including the replica spread";
     }

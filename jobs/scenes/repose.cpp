@@ -95,10 +95,10 @@ engine::ReposeConfig config_from(const nlohmann::json& p) {
 }
 
 // Column, slab depth, stiffness scale and time limit per fidelity, when the job
-// gives none. Provisional until the fidelity study fixes them (design section 9).
-// quick: a 15 mm column of ~300 grains at 1e-3 stiffness (under a minute on one
-// core); standard: the seed's 50 mm column at 1e-3 stiffness (docs/validation.md,
-// ~5 min); reference: the seed's column at 1e-2 stiffness.
+// gives none. quick: a 15 mm column of ~300 grains at 1e-3 stiffness (under a
+// minute on one core); standard: the seed's 50 mm column at 1e-3 stiffness (277 s
+// on one thread); reference: the seed's column at 1e-2 stiffness (1,008 s), which
+// the standard preset matches within 0.3 deg (repose-fidelity study, docs/studies.md).
 struct Preset {
   double column_width, column_height, depth_diameters, stiffness_scale, time_limit;
 };
