@@ -76,6 +76,23 @@ inline double cap_scale(double h2, double cap) {
   return cap / std::sqrt(std::max(std::max(h2, cap * cap), 1e-300));
 }
 
+// One step of an incremental spring with a cap, on one lane: h -= k_dt * u, then
+// brought down to length `cap` if longer (Coulomb for the tangential force, the
+// plastic moment for the rolling one).
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+inline void spring_step(double& hx, double& hy, double& hz, double k_dt, double ux, double uy, double uz,
+                        double cap) {
+  hx -= k_dt * ux;
+  hy -= k_dt * uy;
+  hz -= k_dt * uz;
+  const double s = cap_scale(hx * hx + hy * hy + hz * hz, cap);
+  hx *= s;
+  hy *= s;
+  hz *= s;
+}
+
 }  // namespace batch_detail
 
 // Applies the law to lanes [0, b.count). Friction: Ks > 0 and tan(theta) used;
@@ -114,15 +131,7 @@ void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
       vz -= vn * nz;
       double hx = b.fsx[l], hy = b.fsy[l], hz = b.fsz[l];
       batch_detail::carry(hx, hy, hz, nx, ny, nz, twist);
-      hx -= ksdt * vx;
-      hy -= ksdt * vy;
-      hz -= ksdt * vz;
-      const double cap = fn * tan_theta;
-      const double h2 = hx * hx + hy * hy + hz * hz;
-      const double s = batch_detail::cap_scale(h2, cap);
-      hx *= s;
-      hy *= s;
-      hz *= s;
+      batch_detail::spring_step(hx, hy, hz, ksdt, vx, vy, vz, fn * tan_theta);
       b.fsx[l] = hx;
       b.fsy[l] = hy;
       b.fsz[l] = hz;
@@ -156,16 +165,7 @@ void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
           uz -= un * nz;
         }
         const double r = 0.5 * rsum;
-        const double kr = krdt * r * r;
-        mx -= kr * ux;
-        my -= kr * uy;
-        mz -= kr * uz;
-        const double mcap = eta * r * fn;
-        const double m2 = mx * mx + my * my + mz * mz;
-        const double ms = batch_detail::cap_scale(m2, mcap);
-        mx *= ms;
-        my *= ms;
-        mz *= ms;
+        batch_detail::spring_step(mx, my, mz, krdt * r * r, ux, uy, uz, eta * r * fn);
         b.mrx[l] = mx;
         b.mry[l] = my;
         b.mrz[l] = mz;

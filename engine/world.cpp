@@ -163,6 +163,12 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   std::uint8_t* TOUCH = nl_.touching.data();
   PairBatch b;
   int lanes = 0;  // a local, not b.count: the packing loop keeps it in a register
+  auto flush = [&] {
+    b.count = lanes;
+    pair_batch_law(law, dt, b);
+    scatter_batch(b, F, T, FS, MR, acc);
+    lanes = 0;
+  };
 
   for (int i = begin; i < end; ++i) {
     const Vec3 xi = X[i], vi = V[i], wi = W[i];
@@ -210,19 +216,10 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       b.mrx[l] = MR[e].x();
       b.mry[l] = MR[e].y();
       b.mrz[l] = MR[e].z();
-      if (lanes == kPairBatch) {
-        b.count = lanes;
-        pair_batch_law(law, dt, b);
-        scatter_batch(b, F, T, FS, MR, acc);
-        lanes = 0;
-      }
+      if (lanes == kPairBatch) flush();
     }
   }
-  if (lanes > 0) {
-    b.count = lanes;
-    pair_batch_law(law, dt, b);
-    scatter_batch(b, F, T, FS, MR, acc);
-  }
+  if (lanes > 0) flush();
 }
 
 void World::update_wall_candidates() {
