@@ -4,7 +4,7 @@
 //
 //   bench_repose_validation [--seed N] [--threads N] [--scale S] [--theta DEG]
 //       [--eta E] [--width M] [--height M] [--depth D] [--time-limit S]
-//       [--dt-factor K] [--out PREFIX]
+//       [--dt-factor K] [--side-walls periodic|smooth|frictional] [--out PREFIX]
 #include "engine/scenes/repose.hpp"
 
 #include <chrono>
@@ -40,6 +40,17 @@ int main(int argc, char** argv) {
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i];
     const double v = std::atof(argv[i + 1]);
+    if (k == "--side-walls") {
+      const std::string s = argv[i + 1];
+      if (s == "periodic") c.side_walls = SideWalls::periodic;
+      else if (s == "smooth") c.side_walls = SideWalls::smooth;
+      else if (s == "frictional") c.side_walls = SideWalls::frictional;
+      else {
+        std::fprintf(stderr, "--side-walls: expected periodic, smooth or frictional, got %s\n", s.c_str());
+        return 2;
+      }
+      continue;
+    }
     if (k == "--seed") c.seed = static_cast<std::uint64_t>(v);
     else if (k == "--threads") c.threads = static_cast<int>(v);
     else if (k == "--scale") c.stiffness_scale = v;

@@ -89,6 +89,14 @@ std::vector<std::uint8_t> mobile_mask(const Particles& p) {
 
 }  // namespace
 
+const char* to_string(SideWalls s) {
+  switch (s) {
+    case SideWalls::smooth: return "smooth";
+    case SideWalls::frictional: return "frictional";
+    default: return "periodic";
+  }
+}
+
 void ReposeConfig::validate() const {
   material.validate();
   positive(column_width, "repose.column_width");
@@ -132,7 +140,13 @@ void ReposeConfig::validate() const {
   const double d_mean = 0.5 * (material.d_min + material.d_max);
   const double depth = slab_depth_diameters * d_mean;
   const double reach = material.d_max + 0.1 * material.d_min;  // largest diameter plus the default skin
-  if (depth < 2.0 * reach) {
+  if (side_walls != SideWalls::periodic && depth < material.d_max) {
+    std::ostringstream os;
+    os << "slab depth " << depth << " m between side walls cannot hold the largest grain (" << material.d_max
+       << " m); use at least " << std::ceil(10.0 * material.d_max / d_mean) / 10.0;
+    throw ConfigError("repose.slab_depth_diameters", os.str());
+  }
+  if (side_walls == SideWalls::periodic && depth < 2.0 * reach) {
     std::ostringstream os;
     os << "slab depth " << depth << " m is below twice the interaction reach " << reach
        << " m (periodic images would interact); use at least " << std::ceil(20.0 * reach / d_mean) / 10.0;
@@ -212,7 +226,12 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   res.rest_ke_J = cfg.rest_ke_ratio * m_mean * g * d_mean;
   {
     std::ostringstream os;
-    os << "slab periodic in y (depth " << Ly << " m, no side walls); smooth back wall x = 0; smooth gate x = " << W
+    if (cfg.side_walls == SideWalls::periodic)
+      os << "slab periodic in y (depth " << Ly << " m, no side walls)";
+    else
+      os << "slab of depth " << Ly << " m between " << to_string(cfg.side_walls) << " side walls y = 0 and y = " << Ly
+         << (cfg.side_walls == SideWalls::frictional ? " (the grains' theta and eta)" : "");
+    os << "; smooth back wall x = 0; smooth gate x = " << W
        << " (removed at collapse); smooth end wall x = " << L << "; floor: fixed grains (same size distribution) on a"
        << " rough plane z = 0";
     res.boundaries = os.str();
@@ -265,7 +284,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   for (std::size_t i = 0; i < floor_all.size(); ++i)
     if (floor_all.x[i][0] < W) prep.add(floor_all.x[i], floor_all.r[i], mat.density, true);
   const std::size_t n_floor_prep = prep.size();
-  insert_random(prep, radii, Vec3(0.0, 0.0, z0), Vec3(W, Ly, z0 + fill_h), mat.density, rng, {false, true, false});
+  const bool periodic_y = cfg.side_walls == SideWalls::periodic;
+  insert_random(prep, radii, Vec3(0.0, 0.0, z0), Vec3(W, Ly, z0 + fill_h), mat.density, rng, {false, periodic_y, false});
 
   double m_min = 1e300;
   for (std::size_t i = n_floor_prep; i < prep.size(); ++i) m_min = std::min(m_min, prep.m[i]);
@@ -279,12 +299,22 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   Domain dom;
   dom.lo = Vec3(0.0, 0.0, 0.0);
   dom.hi = Vec3(L, Ly, z0 + fill_h + H);
-  dom.periodic = {false, true, false};
+  dom.periodic = {false, periodic_y, false};
 
   const Wall floor_wall = make_wall("floor", Vec3::Zero(), Vec3::UnitZ(), true);
   const Wall back_wall = make_wall("back", Vec3::Zero(), Vec3::UnitX(), false);
   const Wall gate_wall = make_wall("gate", Vec3(W, 0.0, 0.0), -Vec3::UnitX(), false);
   const Wall end_wall = make_wall("end", Vec3(L, 0.0, 0.0), -Vec3::UnitX(), false);
+  std::vector<Wall> side;
+  if (!periodic_y) {
+    const bool rough = cfg.side_walls == SideWalls::frictional;
+    side.push_back(make_wall("side_y0", Vec3::Zero(), Vec3::UnitY(), rough));
+    side.push_back(make_wall("side_y1", Vec3(0.0, Ly, 0.0), -Vec3::UnitY(), rough));
+  }
+  auto walls = [&side](std::vector<Wall> w) {
+    w.insert(w.end(), side.begin(), side.end());
+    return w;
+  };
 
   long steps_total = 0;
   const double ke_unit = m_mean * g * d_mean;
@@ -325,7 +355,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       return w.time() - t0;
     };
 
-    World w1(std::move(prep), {floor_wall, back_wall, gate_wall}, dom, law, opt);
+    World w1(std::move(prep), walls({floor_wall, back_wall, gate_wall}), dom, law, opt);
     res.prep_time_s += settle(w1, std::sqrt(2.0 * fill_h / g), "settle");
     if (obs) obs->on_progress(0.15);
 
@@ -342,7 +372,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       kept += drop[i] ? 0 : 1;
     }
     lev.remove_if(drop);
-    World w2(std::move(lev), {floor_wall, back_wall, gate_wall}, dom, law, opt);
+    World w2(std::move(lev), walls({floor_wall, back_wall, gate_wall}), dom, law, opt);
     res.prep_time_s += settle(w2, 0.02, "settle_levelled");
     if (obs) obs->on_progress(0.25);
 
@@ -379,7 +409,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     copt.local_damping = 0.0;
     Wall gate_off = gate_wall;
     gate_off.active = false;
-    World w(std::move(all), {floor_wall, back_wall, gate_off, end_wall}, dom, law, copt);
+    World w(std::move(all), walls({floor_wall, back_wall, gate_off, end_wall}), dom, law, copt);
     const StabilityLimits lim = stability_limits(w);
     res.dt_critical = lim.governing().dt_critical;
     res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";

@@ -2,7 +2,9 @@
 // Angle of repose by granular column collapse (seed Sec. 2.2.4, Figs. 2.14, 2.15).
 //
 // A quasi-2D slab: x is the spreading direction, z is up, y is periodic with a
-// depth of a few mean diameters (the slab replaces side walls: there are none).
+// depth of a few mean diameters (the slab replaces side walls), or bounded by two
+// side walls (smooth, or frictional with the grains' theta and eta) when the
+// question is what a narrow laboratory channel does to the deposit.
 // A column of grains (column_width x column_height) is generated against a smooth
 // back wall (x = 0) behind a smooth gate (x = column_width), settled under gravity
 // with temporary local damping, levelled to column_height and settled again; the
@@ -31,13 +33,22 @@ namespace demcal::engine {
 // The seed's material for this scene: Table 2.1 with theta = 30 deg, eta = 0.1.
 Material repose_seed_material();
 
+// How the slab is closed in depth (y).
+enum class SideWalls {
+  periodic,   // no walls: periodic images (the default; a slab of an unbounded heap)
+  smooth,     // two frictionless walls at y = 0 and y = depth
+  frictional  // two walls with the grains' friction angle and rolling resistance
+};
+const char* to_string(SideWalls s);
+
 struct ReposeConfig {
   Material material = repose_seed_material();
 
   // Geometry [m]
   double column_width = 0.05;        // L0: gate position
   double column_height = 0.05;       // H0: fill height after levelling (above the floor level)
-  double slab_depth_diameters = 4.0; // periodic depth in units of d_mean (>= 2 (d_max + skin) / d_mean)
+  double slab_depth_diameters = 4.0; // depth in units of d_mean (periodic: >= 2 (d_max + skin) / d_mean)
+  SideWalls side_walls = SideWalls::periodic;
   double domain_length = 0.0;        // x of the end wall; 0: column_width + 4 * column_height + 0.02 m
   double floor_spacing = 0.0;        // centre spacing of the fixed floor grains' square grid; 0: d_max
 

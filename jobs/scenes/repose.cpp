@@ -22,6 +22,9 @@ std::vector<ParamSpec> repose_params() {
   p.push_back(real_param(kSection, "column_width", "column_width", nullptr).above(0).at_most(10));
   p.push_back(real_param(kSection, "column_height", "column_height", nullptr).above(0).at_most(10));
   p.push_back(real_param(kSection, "depth_diameters", "depth_diameters", nullptr).above(0).at_most(1000));
+  // No fallback: a job that leaves side_walls out is periodic and keeps the task
+  // key it had before this field existed (stored results stay reusable).
+  p.push_back(choice_param(kSection, "side_walls", "side_walls", {"periodic", "smooth", "frictional"}, nullptr));
   p.push_back(real_param(kSection, "domain_length", "domain_length", d.domain_length).at_least(0).at_most(100));
   p.push_back(real_param(kSection, "floor_spacing", "floor_spacing", d.floor_spacing).at_least(0).at_most(1));
   // Preparation
@@ -64,6 +67,10 @@ engine::ReposeConfig config_from(const nlohmann::json& p) {
   c.column_width = p.at("column_width").get<double>();
   c.column_height = p.at("column_height").get<double>();
   c.slab_depth_diameters = p.at("depth_diameters").get<double>();
+  const std::string side = p.value("side_walls", std::string("periodic"));
+  c.side_walls = side == "smooth"       ? engine::SideWalls::smooth
+                 : side == "frictional" ? engine::SideWalls::frictional
+                                        : engine::SideWalls::periodic;
   c.domain_length = p.at("domain_length").get<double>();
   c.floor_spacing = p.at("floor_spacing").get<double>();
   c.fill_solid_fraction = p.at("fill_solid_fraction").get<double>();

@@ -96,12 +96,31 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   EXPECT_EQ(example("seed-study/replicas.json").tasks.size(), 3u);
   EXPECT_EQ(example("seed-study/dense-loose-envelope.json").tasks.size(), 4u);
   EXPECT_EQ(example("seed-study/repose.json").tasks.size(), 5u);
+  const Job walled = example("seed-study/repose-walled.json");
+  ASSERT_EQ(walled.tasks.size(), 5u);
+  EXPECT_EQ(walled.tasks[0].params["side_walls"].get<std::string>(), "frictional");
+  EXPECT_DOUBLE_EQ(walled.tasks[0].params["depth_diameters"].get<double>(), 8.0);
 
   const Job rep = example("repose.json");
   EXPECT_EQ(rep.scene, "repose");
   EXPECT_EQ(rep.tasks.size(), 48u);
   EXPECT_DOUBLE_EQ(rep.tasks[0].params["column_width"].get<double>(), 0.05);
   EXPECT_DOUBLE_EQ(rep.tasks[0].params["depth_diameters"].get<double>(), 4.0);
+  // side_walls has no default in the task parameters: jobs written before it
+  // existed keep their task keys (and their stored results).
+  EXPECT_FALSE(rep.tasks[0].params.contains("side_walls"));
+
+  const Job walls = example("repose-side-walls.json");
+  ASSERT_EQ(walls.tasks.size(), 4u);
+  for (const auto& t : walls.tasks) EXPECT_EQ(t.params["side_walls"].get<std::string>(), "frictional");
+}
+
+TEST(TriaxialReposeScenes, SideWallsBetweenWallsMayBeThinnerThanThePeriodicSlab) {
+  json j = repose_base();
+  j["repose"]["depth_diameters"] = 2.0;  // 3 mm: periodic images of a 2 mm grain would interact
+  EXPECT_NE(error_of(j).find("repose.depth_diameters"), std::string::npos);
+  j["repose"]["side_walls"] = "smooth";
+  EXPECT_EQ(error_of(j), "");
 }
 
 TEST(TriaxialReposeScenes, ConfiningPressureAndPackingAreGridAxes) {
@@ -196,6 +215,8 @@ const std::vector<Bad>& bad_cases() {
       {"repose_particles_not_a_knob", true, [](json& j) { j["repose"]["particles"] = 3000; }, "repose.particles"},
       {"repose_eta_negative", true, [](json& j) { j["grid"]["eta"] = {-0.1}; }, "grid.eta[0]"},
       {"repose_slab_too_thin", true, [](json& j) { j["repose"]["depth_diameters"] = 1.5; }, "repose.depth_diameters"},
+      {"repose_side_walls_unknown", true, [](json& j) { j["repose"]["side_walls"] = "rough"; }, "repose.side_walls"},
+      {"repose_side_walls_too_close", true, [](json& j) { j["repose"]["side_walls"] = "frictional"; j["repose"]["depth_diameters"] = 1.0; }, "repose.depth_diameters"},
       {"repose_column_too_narrow", true, [](json& j) { j["repose"]["column_width"] = 0.003; }, "repose.column_width"},
       {"repose_stiffness_scale_above_one", true, [](json& j) { j["repose"]["stiffness_scale"] = 2; }, "repose.stiffness_scale"},
       {"repose_fit_window_inverted", true, [](json& j) { j["repose"]["fit_lo"] = 0.8; j["repose"]["fit_hi"] = 0.5; }, "repose.fit_hi"},
