@@ -111,7 +111,7 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   EXPECT_FALSE(rep.tasks[0].params.contains("side_walls"));
 
   const Job walls = example("repose-side-walls.json");
-  ASSERT_EQ(walls.tasks.size(), 4u);
+  ASSERT_EQ(walls.tasks.size(), 6u);
   for (const auto& t : walls.tasks) EXPECT_EQ(t.params["side_walls"].get<std::string>(), "frictional");
 }
 
