@@ -4,6 +4,7 @@
 # Usage, from the repository root:
 #   gnuplot -e "prefix='docs/plots/data/repose_theta30_eta0.1_seed1'" \
 #           -e "outfile='docs/repose_theta30_eta0.1.png'" docs/plots/repose_deposit.gp
+# (add -e "setup='frictional side walls 8 d apart'" for the walled run's title)
 if (!exists("prefix")) prefix = 'docs/plots/data/repose_theta30_eta0.1_seed1'
 if (!exists("outfile")) outfile = 'docs/repose_theta30_eta0.1.png'
 load prefix.'_fit.txt'
@@ -16,7 +17,8 @@ set ylabel 'z [mm]'
 set key top right box opaque
 set xrange [0:*]
 set yrange [0:*]
-set title sprintf('Column collapse, theta = 30 deg, eta = 0.1: angle of repose %.1f +- %.1f deg (fit 0.2-0.8 H), steepest %.1f deg; seed Fig. 2.15: 31.3 deg', repose, fit_err, steepest)
+if (!exists("setup")) setup = 'periodic slab 4 d'
+set title sprintf('Column collapse (%s), theta = 30 deg, eta = 0.1: angle of repose %.1f +- %.1f deg (fit 0.2-0.8 H), steepest %.1f deg; seed Fig. 2.15: 31.3 deg', setup, repose, fit_err, steepest)
 # grains as circles (side view, all depths overlaid); fixed floor grains grey
 f(x) = 1e3*(floor_level + fit_a + fit_b*x/1e3)
 plot prefix.'_grains.csv' skip 1 using ($1*1e3):($3*1e3):($4*1e3):($5 > 0 ? 0x999999 : 0xd9a441) \
