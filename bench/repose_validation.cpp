@@ -41,12 +41,8 @@ int main(int argc, char** argv) {
     const std::string k = argv[i];
     const double v = std::atof(argv[i + 1]);
     if (k == "--side-walls") {
-      const std::string s = argv[i + 1];
-      if (s == "periodic") c.side_walls = SideWalls::periodic;
-      else if (s == "smooth") c.side_walls = SideWalls::smooth;
-      else if (s == "frictional") c.side_walls = SideWalls::frictional;
-      else {
-        std::fprintf(stderr, "--side-walls: expected periodic, smooth or frictional, got %s\n", s.c_str());
+      if (!parse_side_walls(argv[i + 1], c.side_walls)) {
+        std::fprintf(stderr, "--side-walls: expected periodic, smooth or frictional, got %s\n", argv[i + 1]);
         return 2;
       }
       continue;

@@ -39,6 +39,18 @@ struct alignas(64) PairBatch {
 
 namespace batch_detail {
 
+// Removes the component along the unit normal n from (x, y, z) and returns it.
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+inline double drop_normal(double& x, double& y, double& z, double nx, double ny, double nz) {
+  const double c = x * nx + y * ny + z * nz;
+  x -= c * nx;
+  y -= c * ny;
+  z -= c * nz;
+  return c;
+}
+
 // carry_into_tangent_plane of contact_law.hpp on one lane: twist with the pair,
 // drop the normal component, restore the magnitude.
 #if defined(__GNUC__)
@@ -49,10 +61,7 @@ inline void carry(double& hx, double& hy, double& hz, double nx, double ny, doub
   double x = hx + twist * (ny * hz - nz * hy);
   double y = hy + twist * (nz * hx - nx * hz);
   double z = hz + twist * (nx * hy - ny * hx);
-  const double hn = x * nx + y * ny + z * nz;
-  x -= hn * nx;
-  y -= hn * ny;
-  z -= hn * nz;
+  drop_normal(x, y, z, nx, ny, nz);
   const double now2 = x * x + y * y + z * z;
   // The pair turns by a tiny angle per step, so q = mag2/now2 - 1 is ~1e-10:
   // sqrt(1 + q) = 1 + q/2 - q^2/8 to O(q^3) needs one division and no root. Even
@@ -125,10 +134,7 @@ void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
       double vx = b.vx[l] + (sy * nz - sz * ny);
       double vy = b.vy[l] + (sz * nx - sx * nz);
       double vz = b.vz[l] + (sx * ny - sy * nx);
-      const double vn = vx * nx + vy * ny + vz * nz;
-      vx -= vn * nx;
-      vy -= vn * ny;
-      vz -= vn * nz;
+      batch_detail::drop_normal(vx, vy, vz, nx, ny, nz);
       double hx = b.fsx[l], hy = b.fsy[l], hz = b.fsz[l];
       batch_detail::carry(hx, hy, hz, nx, ny, nz, twist);
       batch_detail::spring_step(hx, hy, hz, ksdt, vx, vy, vz, fn * tan_theta);
@@ -149,20 +155,14 @@ void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
         double ux = wix - wjx, uy = wiy - wjy, uz = wiz - wjz;
         double mx = b.mrx[l], my = b.mry[l], mz = b.mrz[l];
         if constexpr (Twist) {
-          const double mt = mx * nx + my * ny + mz * nz;
-          mx -= mt * nx;
-          my -= mt * ny;
-          mz -= mt * nz;
+          const double mt = batch_detail::drop_normal(mx, my, mz, nx, ny, nz);
           batch_detail::carry(mx, my, mz, nx, ny, nz, twist);
           mx += mt * nx;
           my += mt * ny;
           mz += mt * nz;
         } else {
           batch_detail::carry(mx, my, mz, nx, ny, nz, twist);
-          const double un = ux * nx + uy * ny + uz * nz;
-          ux -= un * nx;
-          uy -= un * ny;
-          uz -= un * nz;
+          batch_detail::drop_normal(ux, uy, uz, nx, ny, nz);
         }
         const double r = 0.5 * rsum;
         batch_detail::spring_step(mx, my, mz, krdt * r * r, ux, uy, uz, eta * r * fn);

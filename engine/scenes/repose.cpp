@@ -97,6 +97,15 @@ const char* to_string(SideWalls s) {
   }
 }
 
+bool parse_side_walls(const std::string& name, SideWalls& s) {
+  for (SideWalls c : {SideWalls::periodic, SideWalls::smooth, SideWalls::frictional})
+    if (name == to_string(c)) {
+      s = c;
+      return true;
+    }
+  return false;
+}
+
 void ReposeConfig::validate() const {
   material.validate();
   positive(column_width, "repose.column_width");

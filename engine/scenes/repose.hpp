@@ -40,6 +40,8 @@ enum class SideWalls {
   frictional  // two walls with the grains' friction angle and rolling resistance
 };
 const char* to_string(SideWalls s);
+// The inverse of to_string: false (s untouched) for an unknown name.
+bool parse_side_walls(const std::string& name, SideWalls& s);
 
 struct ReposeConfig {
   Material material = repose_seed_material();

@@ -67,10 +67,8 @@ engine::ReposeConfig config_from(const nlohmann::json& p) {
   c.column_width = p.at("column_width").get<double>();
   c.column_height = p.at("column_height").get<double>();
   c.slab_depth_diameters = p.at("depth_diameters").get<double>();
-  const std::string side = p.value("side_walls", std::string("periodic"));
-  c.side_walls = side == "smooth"       ? engine::SideWalls::smooth
-                 : side == "frictional" ? engine::SideWalls::frictional
-                                        : engine::SideWalls::periodic;
+  // The choice is checked against the parameter's list before this runs.
+  engine::parse_side_walls(p.value("side_walls", std::string("periodic")), c.side_walls);
   c.domain_length = p.at("domain_length").get<double>();
   c.floor_spacing = p.at("floor_spacing").get<double>();
   c.fill_solid_fraction = p.at("fill_solid_fraction").get<double>();
