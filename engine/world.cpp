@@ -14,12 +14,6 @@
 
 namespace demcal::engine {
 
-// Per-thread accumulators of the force loop, padded against false sharing.
-struct alignas(64) ThreadAcc {
-  double max_overlap = 0.0;
-  long max_overlap_i = -1;
-};
-
 namespace {
 
 int thread_id() {
@@ -247,18 +241,25 @@ void World::update_wall_candidates() {
   wall_list_builds_ = nl_.builds();
 }
 
-// Grain-wall contacts, serially: only grains within the skin of a wall are tested.
-void World::wall_forces(double& max_overlap, long& max_overlap_i) {
+// Grain-wall contacts of the grains in [begin, end): only grains within the skin of a
+// wall are tested. Each thread takes the same grain range it reduced the pair forces
+// over, so it alone writes those grains' forces and no barrier is needed between
+// walls; per-thread wall sums go to `part` and are added up in thread order after
+// the parallel region (the result depends on the thread count, not on timing).
+void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
   const double dt = opt_.dt;
   const ContactParams law = law_;
   const bool frictional = law.ks > 0.0, rolling = law.rolling();
   const std::size_t np = p_.size();
   for (std::size_t w = 0; w < walls_.size(); ++w) {
-    Wall& wall = walls_[w];
-    wall.force.setZero();
-    wall.contacts = 0;
-    wall.stiffness = 0.0;
-    for (int i : wall_near_[w]) {
+    const Wall& wall = walls_[w];
+    WallPartial& sum = part[w];
+    // The candidate list is in increasing grain order: this thread's part is one run.
+    const std::vector<int>& near = wall_near_[w];
+    const auto first = std::lower_bound(near.begin(), near.end(), begin);
+    const auto last = std::lower_bound(first, near.end(), end);
+    for (auto it = first; it != last; ++it) {
+      const int i = *it;
       const std::size_t slot = w * np + static_cast<std::size_t>(i);
       const double ri = p_.r[i];
       const double h = wall.active ? wall.distance(p_.x[i]) : ri;
@@ -282,17 +283,37 @@ void World::wall_forces(double& max_overlap, long& max_overlap_i) {
                                                   wall.frictional && frictional, wall.rolling && rolling);
       p_.f[i] += c.force;
       p_.t[i] += h * k.n.cross(c.fs) + wall_mr_[slot];
-      wall.force -= c.force;
-      wall.contacts += 1;
-      wall.stiffness += law.kn;
-      if (k.delta / ri > max_overlap) {
-        max_overlap = k.delta / ri;
-        max_overlap_i = i;
+      sum.force += c.force;
+      sum.contacts += 1;
+      if (k.delta > acc.max_overlap * ri) {
+        acc.max_overlap = k.delta / ri;
+        acc.max_overlap_i = i;
       }
     }
   }
 }
 
+// Gravity and (preparation only) local damping on the total force of grains [begin, end).
+void World::external_forces(int begin, int end) {
+  const Vec3 g = opt_.gravity;
+  const double alpha = opt_.local_damping;
+  if (g.squaredNorm() == 0.0 && alpha == 0.0) return;
+  for (int i = begin; i < end; ++i) {
+    if (p_.fixed[i]) continue;
+    p_.f[i] += p_.m[i] * g;
+    if (alpha > 0.0) {
+      for (int a = 0; a < 3; ++a) {
+        p_.f[i][a] -= alpha * std::abs(p_.f[i][a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
+        p_.t[i][a] -= alpha * std::abs(p_.t[i][a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
+      }
+    }
+  }
+}
+
+// One parallel region per force evaluation: pair contacts over interleaved row
+// chunks into thread-private buffers; then each thread owns a contiguous grain range
+// for the reduction of those buffers, the grain-wall contacts and the external
+// forces, which need no barrier between them.
 void World::compute_forces() {
   auto clock = std::chrono::steady_clock::now();
   if (nl_.needs_rebuild(p_, dom_, skin_, opt_.threads)) nl_.build(p_, dom_, skin_, opt_.threads);
@@ -300,8 +321,11 @@ void World::compute_forces() {
   times_.neighbor += seconds_since(clock);
   const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
-  std::vector<ThreadAcc> acc(nt);
+  const std::size_t nw = walls_.size();
+  acc_.assign(nt, ThreadAcc{});
+  wall_part_.assign(static_cast<std::size_t>(nt) * nw, WallPartial{});
   const bool periodic = dom_.any_periodic();
+  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
 
 #pragma omp parallel num_threads(nt)
   {
@@ -317,52 +341,48 @@ void World::compute_forces() {
     for (int b = 0; b < n; b += chunk) {
       const int e = std::min(n, b + chunk);
       if (periodic)
-        force_range<true>(b, e, F, T, acc[tid]);
+        force_range<true>(b, e, F, T, acc_[tid]);
       else
-        force_range<false>(b, e, F, T, acc[tid]);
+        force_range<false>(b, e, F, T, acc_[tid]);
     }
 #pragma omp barrier
-    if (nt > 1) {
-#pragma omp for schedule(static)
-      for (int i = 0; i < n; ++i) {
-        for (int s = 1; s < nt; ++s) {
-          p_.f[i] += buf_f_[s][i];
-          p_.t[i] += buf_t_[s][i];
-        }
+    const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);
+    const int hi = static_cast<int>(static_cast<long long>(n) * (tid + 1) / nt);
+    for (int i = lo; i < hi; ++i) {
+      for (int s = 1; s < nt; ++s) {
+        p_.f[i] += buf_f_[s][i];
+        p_.t[i] += buf_t_[s][i];
       }
     }
+    if (tid == 0) t_pairs = seconds_since(clock);
+    wall_forces(lo, hi, acc_[tid], wall_part_.data() + static_cast<std::size_t>(tid) * nw);
+    if (tid == 0) t_walls = seconds_since(clock);
+    external_forces(lo, hi);
   }
 
+  for (std::size_t w = 0; w < nw; ++w) {
+    Wall& wall = walls_[w];
+    wall.force.setZero();
+    wall.contacts = 0;
+    for (int t = 0; t < nt; ++t) {
+      const WallPartial& part = wall_part_[static_cast<std::size_t>(t) * nw + w];
+      wall.force -= part.force;
+      wall.contacts += part.contacts;
+    }
+    wall.stiffness = wall.contacts * law_.kn;
+  }
   max_overlap_ratio_ = 0.0;
   max_overlap_particle_ = -1;
-  for (const auto& a : acc) {
+  for (const auto& a : acc_) {
     if (a.max_overlap > max_overlap_ratio_) {
       max_overlap_ratio_ = a.max_overlap;
       max_overlap_particle_ = a.max_overlap_i;
     }
   }
-  times_.pairs += seconds_since(clock);
-  wall_forces(max_overlap_ratio_, max_overlap_particle_);
-  times_.walls += seconds_since(clock);
-
-  // Gravity and (preparation only) local damping act on the total force.
-  const Vec3 g = opt_.gravity;
-  const double alpha = opt_.local_damping;
-  if (g.squaredNorm() > 0.0 || alpha > 0.0) {
-#pragma omp parallel for schedule(static) num_threads(nt)
-    for (int i = 0; i < n; ++i) {
-      if (p_.fixed[i]) continue;
-      p_.f[i] += p_.m[i] * g;
-      if (alpha > 0.0) {
-        for (int a = 0; a < 3; ++a) {
-          p_.f[i][a] -= alpha * std::abs(p_.f[i][a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
-          p_.t[i][a] -= alpha * std::abs(p_.t[i][a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
-        }
-      }
-    }
-  }
-  forces_valid_ = true;
+  times_.pairs += t_pairs;
+  times_.walls += t_walls;
   times_.integrate += seconds_since(clock);
+  forces_valid_ = true;
 }
 
 void World::step() {

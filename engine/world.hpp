@@ -23,6 +23,17 @@ struct WorldOptions {
   bool allow_unstable_dt = false;  // for stability studies only: skip the critical-step refusal
 };
 
+// Per-thread accumulators of the force evaluation, padded against false sharing.
+struct alignas(64) ThreadAcc {
+  double max_overlap = 0.0;  // largest overlap / radius seen by the thread
+  long max_overlap_i = -1;
+};
+// One thread's sum over its grains of the force on them from one wall.
+struct alignas(64) WallPartial {
+  Vec3 force = Vec3::Zero();
+  int contacts = 0;
+};
+
 // Wall-clock seconds spent in each phase of the step since the world was made:
 // what a profile of a run costs nothing to read.
 struct PhaseTimes {
@@ -105,9 +116,10 @@ class World {
  private:
   void compute_forces();
   template <bool Periodic>
-  void force_range(int begin, int end, Vec3* F, Vec3* T, struct ThreadAcc& acc);
+  void force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc);
   void update_wall_candidates();
-  void wall_forces(double& max_overlap, long& max_overlap_i);
+  void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
+  void external_forces(int begin, int end);
   void check_finite_and_overlap();
   void check_energy();
 
@@ -128,8 +140,11 @@ class World {
   std::vector<Vec3> wall_point_build_;
   long wall_list_builds_ = -1;
 
-  // Thread-private force buffers (thread 0 writes the particles' own arrays).
+  // Thread-private force buffers (thread 0 writes the particles' own arrays), the
+  // threads' overlap maxima and their sums of each wall's force ([thread * walls + wall]).
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+  std::vector<ThreadAcc> acc_;
+  std::vector<WallPartial> wall_part_;
 
   long step_ = 0;
   double time_ = 0.0;
