@@ -203,7 +203,11 @@ int main(int argc, char** argv) {
       else if (v == "both") rolling_cases = {true, false};
       else usage("--rolling takes yes, no or both, got '" + v + "'");
     } else if (!a.empty() && a[0] != '-') {
-      sizes.push_back(static_cast<std::size_t>(positive("N", a.c_str())));
+      const long n = positive("N", a.c_str());
+      // A dense pack needs room for a few grains per box edge; a small number here is
+      // almost always a second thread count typed as "--threads 1 2".
+      if (n < 100) usage("N = " + a + " is below 100 grains (to time several thread counts, repeat the flag: --threads 1 --threads 2)");
+      sizes.push_back(static_cast<std::size_t>(n));
     } else {
       usage("unknown or incomplete argument '" + a + "'");
     }
