@@ -348,10 +348,12 @@ void World::compute_forces() {
 #pragma omp barrier
     const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);
     const int hi = static_cast<int>(static_cast<long long>(n) * (tid + 1) / nt);
-    for (int i = lo; i < hi; ++i) {
-      for (int s = 1; s < nt; ++s) {
-        p_.f[i] += buf_f_[s][i];
-        p_.t[i] += buf_t_[s][i];
+    if (nt > 1) {
+      for (int i = lo; i < hi; ++i) {
+        for (int s = 1; s < nt; ++s) {
+          p_.f[i] += buf_f_[s][i];
+          p_.t[i] += buf_t_[s][i];
+        }
       }
     }
     if (tid == 0) t_pairs = seconds_since(clock);

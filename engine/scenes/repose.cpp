@@ -98,7 +98,7 @@ const char* to_string(SideWalls s) {
 }
 
 bool parse_side_walls(const std::string& name, SideWalls& s) {
-  for (SideWalls c : {SideWalls::periodic, SideWalls::smooth, SideWalls::frictional})
+  for (SideWalls c : kSideWalls)
     if (name == to_string(c)) {
       s = c;
       return true;

@@ -39,6 +39,9 @@ enum class SideWalls {
   smooth,     // two frictionless walls at y = 0 and y = depth
   frictional  // two walls with the grains' friction angle and rolling resistance
 };
+// Every value, in declaration order: what parse_side_walls and the job layer's
+// choice list are built from.
+inline constexpr SideWalls kSideWalls[] = {SideWalls::periodic, SideWalls::smooth, SideWalls::frictional};
 const char* to_string(SideWalls s);
 // The inverse of to_string: false (s untouched) for an unknown name.
 bool parse_side_walls(const std::string& name, SideWalls& s);

@@ -24,7 +24,9 @@ std::vector<ParamSpec> repose_params() {
   p.push_back(real_param(kSection, "depth_diameters", "depth_diameters", nullptr).above(0).at_most(1000));
   // No fallback: a job that leaves side_walls out is periodic and keeps the task
   // key it had before this field existed (stored results stay reusable).
-  p.push_back(choice_param(kSection, "side_walls", "side_walls", {"periodic", "smooth", "frictional"}, nullptr));
+  std::vector<std::string> side_walls;
+  for (engine::SideWalls s : engine::kSideWalls) side_walls.emplace_back(engine::to_string(s));
+  p.push_back(choice_param(kSection, "side_walls", "side_walls", side_walls, nullptr));
   p.push_back(real_param(kSection, "domain_length", "domain_length", d.domain_length).at_least(0).at_most(100));
   p.push_back(real_param(kSection, "floor_spacing", "floor_spacing", d.floor_spacing).at_least(0).at_most(1));
   // Preparation
@@ -68,7 +70,8 @@ engine::ReposeConfig config_from(const nlohmann::json& p) {
   c.column_height = p.at("column_height").get<double>();
   c.slab_depth_diameters = p.at("depth_diameters").get<double>();
   // The choice is checked against the parameter's list before this runs.
-  engine::parse_side_walls(p.value("side_walls", std::string("periodic")), c.side_walls);
+  // Absent: the engine's default (periodic).
+  if (p.contains("side_walls")) engine::parse_side_walls(p.at("side_walls").get<std::string>(), c.side_walls);
   c.domain_length = p.at("domain_length").get<double>();
   c.floor_spacing = p.at("floor_spacing").get<double>();
   c.fill_solid_fraction = p.at("fill_solid_fraction").get<double>();
