@@ -3,7 +3,7 @@
 //
 //   bench_triaxial_validation [key=value ...]
 //     particles=2000 packing=dense|loose theta=30 eta=0.1 b=1 p0=100e3 rate=1e-4
-//     strain=0.30 dt_factor=0.3 damping=0.3 ufr=0.01 stol=0.01 phi0=0.30 seed=1
+//     strain=0.30 dt_factor=0.3 damping=0.3 shear_damping=0 ufr=0.01 stol=0.01 phi0=0.30 seed=1
 //     twist=0 threads=1 budget=400000 alpha=0.5 beta=0.02 csv=triaxial_series.csv quiet=0
 // Prints the stages, the metrics and the wall time; writes the series as CSV.
 #include "engine/scenes/triaxial.hpp"
@@ -74,6 +74,7 @@ int main(int argc, char** argv) {
   if (c.axial_strain < 0.3) c.cv_from = c.axial_strain * 2.0 / 3.0;
   c.dt_factor = num("dt_factor", c.dt_factor);
   c.prep_damping = num("damping", c.prep_damping);
+  c.shear_damping = num("shear_damping", c.shear_damping);
   c.prep_pressure_factor = num("pfactor", c.prep_pressure_factor);
   c.unloading_steps = static_cast<long>(num("unload", static_cast<double>(c.unloading_steps)));
   c.ufr_tolerance = num("ufr", c.ufr_tolerance);

@@ -41,6 +41,8 @@ void TriaxialConfig::validate() const {
   if (!(initial_solid_fraction > 0.05 && initial_solid_fraction <= 0.4))
     throw ConfigError("triaxial.initial_solid_fraction", "must lie in (0.05, 0.4] for random insertion");
   if (!(prep_damping >= 0.0 && prep_damping < 1.0)) throw ConfigError("triaxial.prep_damping", "must lie in [0, 1)");
+  if (!(shear_damping >= 0.0 && shear_damping < 1.0))
+    throw ConfigError("triaxial.shear_damping", "must lie in [0, 1) (0: none, the seed's protocol)");
   positive(prep_strain_rate, "triaxial.prep_strain_rate");
   if (!std::isfinite(prep_pressure_factor) || prep_pressure_factor < 1.0 || prep_pressure_factor > 1000.0)
     throw ConfigError("triaxial.prep_pressure_factor", "must lie in [1, 1000]");
@@ -78,6 +80,7 @@ Metrics TriaxialResult::metrics() const {
             {"wall_s", wall_seconds},
             {"local_damping_used", local_damping_used ? 1.0 : 0.0},
             {"prep_damping", prep_damping},
+            {"shear_damping", shear_damping},
             {"walls_frictionless", walls_frictionless ? 1.0 : 0.0}};
   if (!outcome.ok()) return m;
   const Metrics mech{{"phi_peak_deg", phi_peak_deg},
@@ -306,7 +309,8 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   res.walls = "six smooth rigid walls (frictionless: normal force only); z axial, x and y lateral; servo-controlled";
   res.walls_frictionless = true;
   res.prep_damping = cfg.prep_damping;
-  res.local_damping_used = cfg.prep_damping > 0.0;
+  res.local_damping_used = cfg.prep_damping > 0.0 || cfg.shear_damping > 0.0;
+  res.shear_damping = cfg.shear_damping;
   res.grain_density = cfg.grain_density();
   res.series.name = "triaxial";
   res.series.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
@@ -378,7 +382,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       res.stages.push_back(
           servo_to_equilibrium(rig, "isotropic_compression", cfg.confining_pressure, prep_gains, 0.0, 0.3));
     }
-    world.set_local_damping(0.0);  // preparation only
+    world.set_local_damping(cfg.shear_damping);  // 0 unless the diagnostic asks for it
 
     // ---- deviatoric stage
     rig.stage = "shear";
@@ -551,6 +555,9 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   if (res.max_inertial_number > cfg.quasi_static_inertial)
     res.outcome.warnings.push_back("quasi-static warning: largest inertial number " + fmt(res.max_inertial_number) +
                                    " exceeds " + fmt(cfg.quasi_static_inertial));
+  if (cfg.shear_damping > 0.0)
+    res.outcome.warnings.push_back("local damping " + fmt(cfg.shear_damping) +
+                                   " was on during shear: a diagnostic, not the seed's undamped protocol");
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");

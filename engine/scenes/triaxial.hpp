@@ -15,7 +15,8 @@
 // that does not get there within its step budget ends the run: not_converged with
 // the stage named, never a result.
 //
-// Deviatoric ("shear"): damping off; top and bottom walls move at a constant
+// Deviatoric ("shear"): damping off (shear_damping > 0 is a diagnostic that leaves
+// local damping on; not the seed's protocol, recorded and warned); top and bottom walls move at a constant
 // engineering axial strain rate (relative to the height at the start of shear),
 // lateral walls servo-held at sigma3 = p0, until the target axial strain.
 //
@@ -59,6 +60,10 @@ struct TriaxialConfig {
 
   // Preparation
   double prep_damping = 0.3;          // local damping, preparation only (0: none)
+  // Local damping left on in shear. The seed's Table 2.1 says none, and that is the
+  // default; a value > 0 exists to measure how much a dissipation the seed does not
+  // state would change phi_peak and phi_cv (docs/validation.md). Recorded, warned.
+  double shear_damping = 0.0;
   // Dense step (i) compresses the frictionless sample to this multiple of p0, then
   // unloads it to p0 ("unloading"): stiff grains (Kn / (p0 d) = 2e5) rearrange
   // sqrt(factor) times faster in steps at the higher pressure; a frictionless
@@ -132,6 +137,7 @@ struct TriaxialResult {
   double d_mean = 0;
   bool local_damping_used = false;
   double prep_damping = 0;
+  double shear_damping = 0;         // > 0: local damping during shear (diagnostic)
   bool walls_frictionless = true;   // the seed's walls are smooth: normal force only
   std::string walls;                // words
   double sample_size[3] = {0, 0, 0};  // box edges at the start of shear [m]

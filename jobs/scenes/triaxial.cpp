@@ -34,6 +34,9 @@ std::vector<ParamSpec> triaxial_params() {
                   .above(0.05).at_most(0.4));
   // Preparation
   p.push_back(real_param(kSection, "prep_damping", "prep_damping", d.prep_damping).at_least(0).below(1));
+  // Diagnostic, absent unless given: a default here would enter every task's
+  // parameters and so change the key of every triaxial task already stored.
+  p.push_back(real_param(kSection, "shear_damping", "shear_damping", nullptr).at_least(0).below(1));
   p.push_back(real_param(kSection, "prep_pressure_factor", "prep_pressure_factor", d.prep_pressure_factor)
                   .at_least(1).at_most(1000));
   p.push_back(int_param(kSection, "unloading_steps", "unloading_steps", static_cast<std::int64_t>(d.unloading_steps))
@@ -81,6 +84,7 @@ engine::TriaxialConfig config_from(const nlohmann::json& p) {
   c.aspect_ratio = p.at("aspect_ratio").get<double>();
   c.initial_solid_fraction = p.at("initial_solid_fraction").get<double>();
   c.prep_damping = p.at("prep_damping").get<double>();
+  c.shear_damping = p.value("shear_damping", 0.0);
   c.prep_pressure_factor = p.at("prep_pressure_factor").get<double>();
   c.unloading_steps = p.at("unloading_steps").get<long>();
   c.prep_strain_rate = p.at("prep_strain_rate").get<double>();

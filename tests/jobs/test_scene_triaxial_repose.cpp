@@ -208,6 +208,8 @@ const std::vector<Bad>& bad_cases() {
       {"sample_strain_beyond", false, [](json& j) { j["triaxial"]["axial_strain"] = 0.01; j["triaxial"]["sample_strain"] = 0.02; }, "triaxial.sample_strain"},
       {"aspect_ratio_too_large", false, [](json& j) { j["triaxial"]["aspect_ratio"] = 5; }, "triaxial.aspect_ratio"},
       {"servo_alpha_too_large", false, [](json& j) { j["triaxial"]["servo_alpha"] = 1.5; }, "triaxial.servo_alpha"},
+      {"shear_damping_one", false, [](json& j) { j["triaxial"]["shear_damping"] = 1.0; }, "triaxial.shear_damping"},
+      {"shear_damping_negative_in_grid", false, [](json& j) { j["grid"]["shear_damping"] = {0.0, -0.1}; }, "grid.shear_damping[1]"},
       {"prep_damping_one", false, [](json& j) { j["triaxial"]["prep_damping"] = 1.0; }, "triaxial.prep_damping"},
       {"triaxial_typo", false, [](json& j) { j["triaxial"]["confining_kPa"] = 100; }, "triaxial.confining_kPa"},
       {"repose_section_in_triaxial_job", false, [](json& j) { j["repose"] = json::object(); }, "repose"},
@@ -241,6 +243,21 @@ TEST_P(BadTriaxialReposeJob, RejectedNamingTheField) {
 
 INSTANTIATE_TEST_SUITE_P(TriaxialReposeScenes, BadTriaxialReposeJob, ::testing::ValuesIn(bad_cases()),
                          [](const ::testing::TestParamInfo<Bad>& i) { return std::string(i.param.name); });
+
+// The diagnostic shear damping is absent from a task's parameters unless the job
+// gives it, so that adding it left the keys of stored triaxial tasks unchanged.
+TEST(TriaxialReposeScenes, ShearDampingEntersTheTaskOnlyWhenGiven) {
+  const Job plain = parse(triaxial_base());
+  for (const auto& t : plain.tasks) EXPECT_FALSE(t.params.contains("shear_damping")) << t.params.dump();
+  json j = triaxial_base();
+  j["triaxial"]["shear_damping"] = 0.2;
+  const Job damped = parse(j);
+  ASSERT_EQ(damped.tasks.size(), plain.tasks.size());
+  for (std::size_t i = 0; i < damped.tasks.size(); ++i) {
+    EXPECT_EQ(damped.tasks[i].params.at("shear_damping").get<double>(), 0.2);
+    EXPECT_NE(damped.tasks[i].key, plain.tasks[i].key);
+  }
+}
 
 TEST(TriaxialReposeScenes, BaseJobsAreValid) {
   EXPECT_EQ(error_of(triaxial_base()), "");
