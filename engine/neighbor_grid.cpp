@@ -183,20 +183,13 @@ void NeighborList::build(const Particles& p, const Domain& dom, double skin, int
 }
 
 bool NeighborList::needs_rebuild(const Particles& p, const Domain& dom, double skin, int threads) const {
-  if (x_build_.size() != p.size()) return true;
+  if (!built_for(p.size())) return true;
   // A pair can close by the displacement of each grain plus the growth of each
   // radius since the build: rebuild when either side may have used half the skin.
-  const double half = 0.5 * skin;
   const long n = static_cast<long>(p.size());
-  const bool periodic = dom.any_periodic();
   bool stale = false;
 #pragma omp parallel for schedule(static) num_threads(std::max(1, threads)) reduction(|| : stale)
-  for (long i = 0; i < n; ++i) {
-    Vec3 d = p.x[i] - x_build_[i];
-    if (periodic) dom.min_image(d);
-    const double left = half - std::max(0.0, p.r[i] - r_build_[i]);
-    stale = stale || left <= 0.0 || d.squaredNorm() > left * left;
-  }
+  for (long i = 0; i < n; ++i) stale = stale || moved_too_far(p.x[i], x_build_[i], p.r[i], r_build_[i], dom, skin);
   return stale;
 }
 

@@ -6,6 +6,7 @@
 #include "particles.hpp"
 #include "types.hpp"
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -29,6 +30,17 @@ class NeighborList {
   // True when some particle has moved, or grown, by more than half the skin since
   // the last build.
   bool needs_rebuild(const Particles& p, const Domain& dom, double skin, int threads = 1) const;
+  // The same test for one grain (x, r now; xb, rb at the build), for a caller that
+  // folds it into a pass of its own over build_positions() and build_radii().
+  static bool moved_too_far(const Vec3& x, const Vec3& xb, double r, double rb, const Domain& dom, double skin) {
+    Vec3 d = x - xb;
+    if (dom.any_periodic()) dom.min_image(d);
+    const double left = 0.5 * skin - std::max(0.0, r - rb);
+    return left <= 0.0 || d.squaredNorm() > left * left;
+  }
+  const Vec3* build_positions() const { return x_build_.data(); }
+  const double* build_radii() const { return r_build_.data(); }
+  bool built_for(std::size_t n) const { return x_build_.size() == n; }
 
   std::size_t size() const { return j.size(); }
   long builds() const { return builds_; }

@@ -298,13 +298,21 @@ void World::external_forces(int begin, int end) {
   const Vec3 g = opt_.gravity;
   const double alpha = opt_.local_damping;
   if (g.squaredNorm() == 0.0 && alpha == 0.0) return;
+  Vec3* __restrict f = p_.f.data();
+  Vec3* __restrict t = p_.t.data();
+  const Vec3* __restrict v = p_.v.data();
+  const Vec3* __restrict w = p_.w.data();
+  const double* __restrict m = p_.m.data();
+  const std::uint8_t* __restrict fixed = p_.fixed.data();
+  // sign(u) as a select: the damping's direction tests are unpredictable branches.
+  auto sign = [](double u) { return static_cast<double>(u > 0.0) - static_cast<double>(u < 0.0); };
   for (int i = begin; i < end; ++i) {
-    if (p_.fixed[i]) continue;
-    p_.f[i] += p_.m[i] * g;
+    if (fixed[i]) continue;
+    f[i] += m[i] * g;
     if (alpha > 0.0) {
       for (int a = 0; a < 3; ++a) {
-        p_.f[i][a] -= alpha * std::abs(p_.f[i][a]) * (p_.v[i][a] > 0 ? 1.0 : (p_.v[i][a] < 0 ? -1.0 : 0.0));
-        p_.t[i][a] -= alpha * std::abs(p_.t[i][a]) * (p_.w[i][a] > 0 ? 1.0 : (p_.w[i][a] < 0 ? -1.0 : 0.0));
+        f[i][a] -= alpha * std::abs(f[i][a]) * sign(v[i][a]);
+        t[i][a] -= alpha * std::abs(t[i][a]) * sign(w[i][a]);
       }
     }
   }
@@ -314,9 +322,35 @@ void World::external_forces(int begin, int end) {
 // chunks into thread-private buffers; then each thread owns a contiguous grain range
 // for the reduction of those buffers, the grain-wall contacts and the external
 // forces, which need no barrier between them.
-void World::compute_forces() {
+void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_, opt_.threads), false); }
+
+// Second half of velocity Verlet for grains [begin, end), whose forces are complete.
+// The arrays go through local restrict pointers: reached through `this`, their
+// addresses were reloaded for every grain (stores of doubles might alias them).
+void World::half_kick(int begin, int end, ThreadAcc& acc) {
+  const double half = 0.5 * opt_.dt;
+  const Vec3* __restrict x = p_.x.data();
+  Vec3* __restrict v = p_.v.data();
+  Vec3* __restrict w = p_.w.data();
+  const Vec3* __restrict f = p_.f.data();
+  const Vec3* __restrict t = p_.t.data();
+  const double* __restrict inv_m = p_.inv_m.data();
+  const double* __restrict inv_i = p_.inv_i.data();
+  const std::uint8_t* __restrict fixed = p_.fixed.data();
+  bool finite = true;
+  for (int i = begin; i < end; ++i) {
+    if (!fixed[i]) {
+      v[i] += (half * inv_m[i]) * f[i];
+      w[i] += (half * inv_i[i]) * t[i];
+    }
+    finite = finite && std::isfinite(x[i].sum() + v[i].sum() + w[i].sum());
+  }
+  acc.finite = finite;
+}
+
+bool World::evaluate_forces(bool rebuild, bool kick) {
   auto clock = std::chrono::steady_clock::now();
-  if (nl_.needs_rebuild(p_, dom_, skin_, opt_.threads)) nl_.build(p_, dom_, skin_, opt_.threads);
+  if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
   times_.neighbor += seconds_since(clock);
   const int n = static_cast<int>(p_.size());
@@ -360,6 +394,7 @@ void World::compute_forces() {
     wall_forces(lo, hi, acc_[tid], wall_part_.data() + static_cast<std::size_t>(tid) * nw);
     if (tid == 0) t_walls = seconds_since(clock);
     external_forces(lo, hi);
+    if (kick) half_kick(lo, hi, acc_[tid]);
   }
 
   for (std::size_t w = 0; w < nw; ++w) {
@@ -375,7 +410,9 @@ void World::compute_forces() {
   }
   max_overlap_ratio_ = 0.0;
   max_overlap_particle_ = -1;
+  bool finite = true;
   for (const auto& a : acc_) {
+    finite = finite && a.finite;
     if (a.max_overlap > max_overlap_ratio_) {
       max_overlap_ratio_ = a.max_overlap;
       max_overlap_particle_ = a.max_overlap_i;
@@ -385,8 +422,12 @@ void World::compute_forces() {
   times_.walls += t_walls;
   times_.integrate += seconds_since(clock);
   forces_valid_ = true;
+  return finite;
 }
 
+// Two parallel regions a step: the first half-kick and drift (with the Verlet-skin
+// test folded in), then the force evaluation, which ends with each thread's second
+// half-kick of the grains it reduced.
 void World::step() {
   if (!forces_valid_) compute_forces();
   auto clock = std::chrono::steady_clock::now();
@@ -396,39 +437,42 @@ void World::step() {
 
   // Work done on the grains by moving walls over this step (trapezoidal rule).
   double wall_power_before = 0.0;
-  for (const auto& w : walls_) wall_power_before -= w.force.dot(w.velocity);
+  for (const auto& wall : walls_) wall_power_before -= wall.force.dot(wall.velocity);
 
-#pragma omp parallel for schedule(static) num_threads(opt_.threads)
+  const bool listed = nl_.built_for(p_.size());
+  bool stale = !listed;
+  Vec3* __restrict x = p_.x.data();
+  Vec3* __restrict v = p_.v.data();
+  Vec3* __restrict w = p_.w.data();
+  const Vec3* __restrict f = p_.f.data();
+  const Vec3* __restrict t = p_.t.data();
+  const double* __restrict inv_m = p_.inv_m.data();
+  const double* __restrict inv_i = p_.inv_i.data();
+  const std::uint8_t* __restrict fixed = p_.fixed.data();
+  const double* __restrict r = p_.r.data();
+  const Vec3* __restrict xb = nl_.build_positions();
+  const double* __restrict rb = nl_.build_radii();
+#pragma omp parallel for schedule(static) num_threads(opt_.threads) reduction(|| : stale)
   for (int i = 0; i < n; ++i) {
-    if (!p_.fixed[i]) {
-      p_.v[i] += (half * p_.inv_m[i]) * p_.f[i];
-      p_.w[i] += (half * p_.inv_i[i]) * p_.t[i];
+    if (!fixed[i]) {
+      v[i] += (half * inv_m[i]) * f[i];
+      w[i] += (half * inv_i[i]) * t[i];
     }
-    p_.x[i] += dt * p_.v[i];
-    if (periodic) dom_.wrap(p_.x[i]);
+    x[i] += dt * v[i];
+    if (periodic) dom_.wrap(x[i]);
+    stale = stale || (listed && NeighborList::moved_too_far(x[i], xb[i], r[i], rb[i], dom_, skin_));
   }
-  for (auto& w : walls_) w.point += dt * w.velocity;
+  for (auto& wall : walls_) wall.point += dt * wall.velocity;
   times_.integrate += seconds_since(clock);
 
-  compute_forces();
-  clock = std::chrono::steady_clock::now();
+  const bool finite = evaluate_forces(stale, true);
 
-  bool finite = true;
-#pragma omp parallel for schedule(static) num_threads(opt_.threads) reduction(&& : finite)
-  for (int i = 0; i < n; ++i) {
-    if (!p_.fixed[i]) {
-      p_.v[i] += (half * p_.inv_m[i]) * p_.f[i];
-      p_.w[i] += (half * p_.inv_i[i]) * p_.t[i];
-    }
-    finite = finite && std::isfinite(p_.x[i].sum() + p_.v[i].sum() + p_.w[i].sum());
-  }
   double wall_power_after = 0.0;
-  for (const auto& w : walls_) wall_power_after -= w.force.dot(w.velocity);
+  for (const auto& wall : walls_) wall_power_after -= wall.force.dot(wall.velocity);
   wall_work_ += half * (wall_power_before + wall_power_after);
 
   ++step_;
   time_ += dt;
-  times_.integrate += seconds_since(clock);
   if (!finite) check_finite_and_overlap();
   if (max_overlap_ratio_ > opt_.max_overlap_fraction) check_finite_and_overlap();
   if (guard_tol_ >= 0.0 && step_ % guard_interval_ == 0) check_energy();

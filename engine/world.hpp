@@ -27,6 +27,7 @@ struct WorldOptions {
 struct alignas(64) ThreadAcc {
   double max_overlap = 0.0;  // largest overlap / radius seen by the thread
   long max_overlap_i = -1;
+  bool finite = true;        // the thread's grains ended the step with finite x, v, w
 };
 // One thread's sum over its grains of the force on them from one wall.
 struct alignas(64) WallPartial {
@@ -115,6 +116,11 @@ class World {
 
  private:
   void compute_forces();
+  // Forces for the current positions (the neighbour list rebuilt first when
+  // `rebuild`); with `kick`, each thread then ends the step of its own grains (the
+  // second half-kick) in the same parallel region. Returns whether all grains are finite.
+  bool evaluate_forces(bool rebuild, bool kick);
+  void half_kick(int begin, int end, ThreadAcc& acc);
   template <bool Periodic>
   void force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc);
   void update_wall_candidates();
