@@ -100,6 +100,15 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   ASSERT_EQ(walled.tasks.size(), 5u);
   EXPECT_EQ(walled.tasks[0].params["side_walls"].get<std::string>(), "frictional");
   EXPECT_DOUBLE_EQ(walled.tasks[0].params["depth_diameters"].get<double>(), 8.0);
+  // The damping diagnostics: eta x damping x two packings, and Table 2.2 damped.
+  const Job damped = example("seed-study/damping-in-shear.json");
+  ASSERT_EQ(damped.tasks.size(), 32u);
+  std::set<double> dampings;
+  for (const auto& t : damped.tasks) dampings.insert(t.params.at("shear_damping").get<double>());
+  EXPECT_EQ(dampings, (std::set<double>{0.0, 0.1, 0.2, 0.3}));
+  const Job damped_theta = example("seed-study/damping-in-shear-theta.json");
+  ASSERT_EQ(damped_theta.tasks.size(), 12u);
+  for (const auto& t : damped_theta.tasks) EXPECT_EQ(t.params.at("shear_damping").get<double>(), 0.2);
 
   const Job rep = example("repose.json");
   EXPECT_EQ(rep.scene, "repose");
