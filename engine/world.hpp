@@ -38,10 +38,10 @@ struct alignas(64) WallPartial {
 // Wall-clock seconds spent in each phase of the step since the world was made:
 // what a profile of a run costs nothing to read.
 struct PhaseTimes {
-  double neighbor = 0.0;   // rebuild check, list rebuilds, wall candidate lists
+  double neighbor = 0.0;   // list rebuilds, wall candidate lists (the skin test is in the drift pass)
   double pairs = 0.0;      // grain-grain contact law, force reduction across threads
   double walls = 0.0;      // grain-wall contacts
-  double integrate = 0.0;  // velocity Verlet passes, gravity, damping, checks
+  double integrate = 0.0;  // velocity Verlet passes with the skin test, gravity, damping, checks
 };
 
 // One contact as measurements see it (recomputed from positions and history).
