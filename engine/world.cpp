@@ -104,6 +104,25 @@ void World::rotate(const Mat3& q, const Vec3& centre) {
 
 namespace {
 
+// The arrays the Verlet passes touch, as plain pointers held in a local: reached
+// through `this`, their addresses were reloaded for every grain (stores of doubles
+// might alias them).
+struct VerletArrays {
+  Vec3 *x, *v, *w;
+  const Vec3 *f, *t;
+  const double *inv_m, *inv_i;
+  const std::uint8_t* fixed;
+  explicit VerletArrays(Particles& p)
+      : x(p.x.data()), v(p.v.data()), w(p.w.data()), f(p.f.data()), t(p.t.data()),
+        inv_m(p.inv_m.data()), inv_i(p.inv_i.data()), fixed(p.fixed.data()) {}
+  // Half a step of velocity Verlet's kick for grain i (fixed grains never move).
+  void kick(int i, double half) const {
+    if (fixed[i]) return;
+    v[i] += (half * inv_m[i]) * f[i];
+    w[i] += (half * inv_i[i]) * t[i];
+  }
+};
+
 // Scatters a finished batch: forces and torques onto the grains, history back into
 // the list, the largest overlap into the thread's accumulator.
 void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, ThreadAcc& acc) {
@@ -325,25 +344,13 @@ void World::external_forces(int begin, int end) {
 void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_, opt_.threads), false); }
 
 // Second half of velocity Verlet for grains [begin, end), whose forces are complete.
-// The arrays go through local restrict pointers: reached through `this`, their
-// addresses were reloaded for every grain (stores of doubles might alias them).
 void World::half_kick(int begin, int end, ThreadAcc& acc) {
   const double half = 0.5 * opt_.dt;
-  const Vec3* __restrict x = p_.x.data();
-  Vec3* __restrict v = p_.v.data();
-  Vec3* __restrict w = p_.w.data();
-  const Vec3* __restrict f = p_.f.data();
-  const Vec3* __restrict t = p_.t.data();
-  const double* __restrict inv_m = p_.inv_m.data();
-  const double* __restrict inv_i = p_.inv_i.data();
-  const std::uint8_t* __restrict fixed = p_.fixed.data();
+  const VerletArrays a(p_);
   bool finite = true;
   for (int i = begin; i < end; ++i) {
-    if (!fixed[i]) {
-      v[i] += (half * inv_m[i]) * f[i];
-      w[i] += (half * inv_i[i]) * t[i];
-    }
-    finite = finite && std::isfinite(x[i].sum() + v[i].sum() + w[i].sum());
+    a.kick(i, half);
+    finite = finite && std::isfinite(a.x[i].sum() + a.v[i].sum() + a.w[i].sum());
   }
   acc.finite = finite;
 }
@@ -441,26 +448,16 @@ void World::step() {
 
   const bool listed = nl_.built_for(p_.size());
   bool stale = !listed;
-  Vec3* __restrict x = p_.x.data();
-  Vec3* __restrict v = p_.v.data();
-  Vec3* __restrict w = p_.w.data();
-  const Vec3* __restrict f = p_.f.data();
-  const Vec3* __restrict t = p_.t.data();
-  const double* __restrict inv_m = p_.inv_m.data();
-  const double* __restrict inv_i = p_.inv_i.data();
-  const std::uint8_t* __restrict fixed = p_.fixed.data();
-  const double* __restrict r = p_.r.data();
-  const Vec3* __restrict xb = nl_.build_positions();
-  const double* __restrict rb = nl_.build_radii();
-#pragma omp parallel for schedule(static) num_threads(opt_.threads) reduction(|| : stale)
+  const VerletArrays a(p_);
+  const double* r = p_.r.data();
+  const Vec3* xb = nl_.build_positions();
+  const double* rb = nl_.build_radii();
+#pragma omp parallel for schedule(static) num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
   for (int i = 0; i < n; ++i) {
-    if (!fixed[i]) {
-      v[i] += (half * inv_m[i]) * f[i];
-      w[i] += (half * inv_i[i]) * t[i];
-    }
-    x[i] += dt * v[i];
-    if (periodic) dom_.wrap(x[i]);
-    stale = stale || (listed && NeighborList::moved_too_far(x[i], xb[i], r[i], rb[i], dom_, skin_));
+    a.kick(i, half);
+    a.x[i] += dt * a.v[i];
+    if (periodic) dom_.wrap(a.x[i]);
+    stale = stale || (listed && NeighborList::moved_too_far(a.x[i], xb[i], r[i], rb[i], dom_, skin_));
   }
   for (auto& wall : walls_) wall.point += dt * wall.velocity;
   times_.integrate += seconds_since(clock);
