@@ -87,6 +87,8 @@ Metrics TriaxialResult::metrics() const {
                      {"eps1_at_peak", eps1_at_peak},
                      {"phi_cv_deg", phi_cv_deg},
                      {"phi_cv_se_deg", phi_cv_se_deg},
+                     {"phi_peak_interior_deg", phi_peak_interior_deg},
+                     {"phi_cv_interior_deg", phi_cv_interior_deg},
                      {"q_peak_pa", q_peak},
                      {"porosity_initial", porosity_initial},
                      {"porosity_final", porosity_final},
@@ -535,6 +537,22 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
     res.phi_cv_deg = NAN;
   }
+  {
+    const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
+    double best_in = -1.0, sum_in = 0.0;
+    int n_in = 0;
+    for (const auto& r : s.rows) {
+      const double lat = 0.5 * (r[c_xx] + r[c_yy]);
+      const double x = (r[c_zz] + lat) > 0.0 ? (r[c_zz] - lat) / (r[c_zz] + lat) : 0.0;
+      best_in = std::max(best_in, x);
+      if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) {
+        sum_in += x;
+        ++n_in;
+      }
+    }
+    res.phi_peak_interior_deg = rad_to_deg(std::asin(std::clamp(best_in, -1.0, 1.0)));
+    res.phi_cv_interior_deg = n_in ? rad_to_deg(std::asin(std::clamp(sum_in / n_in, -1.0, 1.0))) : NAN;
+  }
   res.porosity_final = s.rows.back()[c_n];
   res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
   res.eps_v_final = s.rows.back()[c_ev];
@@ -557,7 +575,10 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
                                    " exceeds " + fmt(cfg.quasi_static_inertial));
   if (cfg.shear_damping > 0.0)
     res.outcome.warnings.push_back("local damping " + fmt(cfg.shear_damping) +
-                                   " was on during shear: a diagnostic, not the seed's undamped protocol");
+                                   " was on during shear: a diagnostic, not the seed's undamped protocol; its forces "
+                                   "carry part of the load, so the walls' angles overstate the contact network's "
+                                   "(phi_cv " + fmt(res.phi_cv_deg, 3) + " deg at the walls, " +
+                                   fmt(res.phi_cv_interior_deg, 3) + " deg in the interior)");
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");

@@ -118,6 +118,10 @@ struct TriaxialResult {
   // Metrics (meaningful only when outcome.ok())
   double phi_peak_deg = 0, eps1_at_peak = 0;
   double phi_cv_deg = 0, phi_cv_se_deg = 0;  // standard error from block means over the window
+  // The same two angles from the interior Love-Weber stress (contact forces only).
+  // They differ from the walls' where body forces carry load: local damping left on
+  // in shear opposes the systematic deformation and holds part of the axial load.
+  double phi_peak_interior_deg = 0, phi_cv_interior_deg = 0;
   int cv_samples = 0;
   double q_peak = 0;                // [Pa]
   double porosity_initial = 0;      // after preparation (start of shear)

@@ -200,6 +200,10 @@ TEST(TriaxialScene, DenseDilatesAndPeaksAboveCriticalState) {
   EXPECT_GT(r.max_dilatancy_deg, 0.0);
   EXPECT_GT(r.phi_cv_deg, 20.0);
   EXPECT_LT(r.phi_peak_deg, 60.0);
+  // The interior's contact stresses tell the same story, within a 400-grain box's noise.
+  EXPECT_GT(r.phi_peak_interior_deg, r.phi_cv_interior_deg);
+  EXPECT_NEAR(r.phi_peak_interior_deg, r.phi_peak_deg, 8.0);
+  EXPECT_NEAR(r.phi_cv_interior_deg, r.phi_cv_deg, 8.0);
   EXPECT_TRUE(r.local_damping_used);
   EXPECT_TRUE(r.walls_frictionless);
 }
@@ -253,7 +257,7 @@ TEST(TriaxialScene, SeriesHasTheDocumentedColumnsAndSampling) {
   };
   for (const char* k : {"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_initial", "porosity_final",
                         "eps_v_final", "max_dilatancy_deg", "max_inertial_number", "local_damping_used",
-                        "walls_frictionless"})
+                        "walls_frictionless", "phi_peak_interior_deg", "phi_cv_interior_deg"})
     EXPECT_TRUE(has(k)) << k;
 }
 
