@@ -337,10 +337,6 @@ void World::external_forces(int begin, int end) {
   }
 }
 
-// One parallel region per force evaluation: pair contacts over interleaved row
-// chunks into thread-private buffers; then each thread owns a contiguous grain range
-// for the reduction of those buffers, the grain-wall contacts and the external
-// forces, which need no barrier between them.
 void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_, opt_.threads), false); }
 
 // Second half of velocity Verlet for grains [begin, end), whose forces are complete.
@@ -355,6 +351,10 @@ void World::half_kick(int begin, int end, ThreadAcc& acc) {
   acc.finite = finite;
 }
 
+// One parallel region per force evaluation: pair contacts over interleaved row
+// chunks into thread-private buffers; then each thread owns a contiguous grain range
+// for the reduction of those buffers, the grain-wall contacts, the external forces
+// and (with `kick`) the second half-kick, which need no barrier between them.
 bool World::evaluate_forces(bool rebuild, bool kick) {
   auto clock = std::chrono::steady_clock::now();
   if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);

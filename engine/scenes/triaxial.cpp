@@ -217,6 +217,14 @@ Mat3 interior_stress(const World& w, const Region& reg, double& porosity_in) {
   return vp_in > 0.0 ? Mat3(plain * (solid_in / vp_in)) : plain;
 }
 
+// sin(phi_mob) of an axial and two lateral principal stresses (compression
+// positive): (s1 - s3) / (s1 + s3) with s3 the lateral mean; 0 if the sum is not > 0.
+double mobilised_sine(double axial, double lateral_a, double lateral_b) {
+  const double s3 = 0.5 * (lateral_a + lateral_b);
+  return (axial + s3) > 0.0 ? (axial - s3) / (axial + s3) : 0.0;
+}
+double sine_to_deg(double x) { return rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))); }
+
 double kinetic_energy(const Particles& p) {
   double e = 0.0;
   for (std::size_t i = 0; i < p.size(); ++i) {
@@ -427,7 +435,6 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       const double s1 = rig.axis_stress(2), s2 = rig.axis_stress(0), s3 = rig.axis_stress(1);
       const double s3m = 0.5 * (s2 + s3);
       const double pm = (s1 + s2 + s3) / 3.0, q = s1 - s3m;
-      const double ratio = (s1 + s3m) > 0 ? (s1 - s3m) / (s1 + s3m) : 0.0;
       double n_in = 0.0;
       const Mat3 lw = interior_stress(world, rig.interior(), n_in);
       const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
@@ -443,7 +450,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
         }
       }
       res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
-                      rad_to_deg(std::asin(std::clamp(ratio, -1.0, 1.0))), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
+                      sine_to_deg(mobilised_sine(s1, s2, s3)), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
                       z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
                       static_cast<double>(world.step_count())},
                      obs);
@@ -495,29 +502,34 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   const std::size_t c_e1 = s.column("eps1"), c_ev = s.column("eps_v"), c_s1 = s.column("sigma1"),
                     c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3"), c_q = s.column("q"),
                     c_n = s.column("porosity"), c_in = s.column("inertial");
-  auto ratio = [&](const std::vector<double>& r) {
-    const double s3m = 0.5 * (r[c_s2] + r[c_s3]);
-    return (r[c_s1] - s3m) / (r[c_s1] + s3m);
-  };
-  double best = -1.0;
+  const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
+  // The walls' angles, and the same from the interior Love-Weber stress.
+  double best = -1.0, best_in = -1.0, cv_in = 0.0;
   std::vector<double> cv;
   for (const auto& r : s.rows) {
-    const double x = ratio(r);
+    const double x = mobilised_sine(r[c_s1], r[c_s2], r[c_s3]);
+    const double x_in = mobilised_sine(r[c_zz], r[c_xx], r[c_yy]);
     if (x > best) {
       best = x;
       res.eps1_at_peak = r[c_e1];
       res.q_peak = r[c_q];
     }
-    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) cv.push_back(x);
+    best_in = std::max(best_in, x_in);
+    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) {
+      cv.push_back(x);
+      cv_in += x_in;
+    }
     res.max_inertial_number = std::max(res.max_inertial_number, r[c_in]);
   }
-  res.phi_peak_deg = rad_to_deg(std::asin(std::clamp(best, -1.0, 1.0)));
+  res.phi_peak_deg = sine_to_deg(best);
+  res.phi_peak_interior_deg = sine_to_deg(best_in);
   res.cv_samples = static_cast<int>(cv.size());
   if (!cv.empty()) {
     double mean = 0.0;
     for (double x : cv) mean += x;
     mean /= static_cast<double>(cv.size());
-    res.phi_cv_deg = rad_to_deg(std::asin(std::clamp(mean, -1.0, 1.0)));
+    res.phi_cv_deg = sine_to_deg(mean);
+    res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
     // Successive rows are correlated: the standard error comes from block means.
     const std::size_t nb = std::min<std::size_t>(10, cv.size() / 3);
     if (nb >= 2) {
@@ -536,22 +548,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   } else {
     res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
     res.phi_cv_deg = NAN;
-  }
-  {
-    const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
-    double best_in = -1.0, sum_in = 0.0;
-    int n_in = 0;
-    for (const auto& r : s.rows) {
-      const double lat = 0.5 * (r[c_xx] + r[c_yy]);
-      const double x = (r[c_zz] + lat) > 0.0 ? (r[c_zz] - lat) / (r[c_zz] + lat) : 0.0;
-      best_in = std::max(best_in, x);
-      if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) {
-        sum_in += x;
-        ++n_in;
-      }
-    }
-    res.phi_peak_interior_deg = rad_to_deg(std::asin(std::clamp(best_in, -1.0, 1.0)));
-    res.phi_cv_interior_deg = n_in ? rad_to_deg(std::asin(std::clamp(sum_in / n_in, -1.0, 1.0))) : NAN;
+    res.phi_cv_interior_deg = NAN;
   }
   res.porosity_final = s.rows.back()[c_n];
   res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
@@ -566,7 +563,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       // leaves the formula's domain: it is the most contractive angle, not +90.
       const double denom = 2.0 * de1 - dev;
       const double x = denom > 0.0 ? -dev / denom : -1.0;
-      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))));
+      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, sine_to_deg(x));
       break;
     }
   }
