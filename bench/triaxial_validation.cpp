@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <stdexcept>
 #include <string>
 
 using namespace demcal::engine;
@@ -90,7 +91,13 @@ int main(int argc, char** argv) {
 
   Printer obs;
   obs.quiet = num("quiet", 0) != 0;
-  const TriaxialResult r = run_triaxial(c, &obs);
+  TriaxialResult r;
+  try {
+    r = run_triaxial(c, &obs);
+  } catch (const std::invalid_argument& e) {  // a bad argument (field named), not std::terminate
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 2;
+  }
   std::printf("status %s%s%s\n", to_string(r.outcome.status),
               r.outcome.failed_stage.empty() ? "" : (" in " + r.outcome.failed_stage).c_str(),
               r.outcome.message.empty() ? "" : (": " + r.outcome.message).c_str());

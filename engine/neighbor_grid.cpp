@@ -189,7 +189,11 @@ bool NeighborList::needs_rebuild(const Particles& p, const Domain& dom, double s
   const long n = static_cast<long>(p.size());
   bool stale = false;
 #pragma omp parallel for schedule(static) num_threads(std::max(1, threads)) reduction(|| : stale)
-  for (long i = 0; i < n; ++i) stale = stale || moved_too_far(p.x[i], x_build_[i], p.r[i], r_build_[i], dom, skin);
+  for (long i = 0; i < n; ++i) {
+    Vec3 d = p.x[i] - x_build_[i];
+    dom.min_image(d);
+    stale = stale || moved_too_far(d, p.r[i], r_build_[i], skin);
+  }
   return stale;
 }
 

@@ -30,11 +30,10 @@ class NeighborList {
   // True when some particle has moved, or grown, by more than half the skin since
   // the last build.
   bool needs_rebuild(const Particles& p, const Domain& dom, double skin, int threads = 1) const;
-  // The same test for one grain (x, r now; xb, rb at the build), for a caller that
-  // folds it into a pass of its own over build_positions() and build_radii().
-  static bool moved_too_far(const Vec3& x, const Vec3& xb, double r, double rb, const Domain& dom, double skin) {
-    Vec3 d = x - xb;
-    if (dom.any_periodic()) dom.min_image(d);
+  // The same test for one grain: d is its displacement since the build (minimum
+  // image), r and rb its radius now and at the build. For a caller that folds the
+  // test into a pass of its own over build_positions() and build_radii().
+  static bool moved_too_far(const Vec3& d, double r, double rb, double skin) {
     const double left = 0.5 * skin - std::max(0.0, r - rb);
     return left <= 0.0 || d.squaredNorm() > left * left;
   }

@@ -111,13 +111,12 @@ struct VerletArrays {
   Vec3 *x, *v, *w;
   const Vec3 *f, *t;
   const double *inv_m, *inv_i;
-  const std::uint8_t* fixed;
   explicit VerletArrays(Particles& p)
       : x(p.x.data()), v(p.v.data()), w(p.w.data()), f(p.f.data()), t(p.t.data()),
-        inv_m(p.inv_m.data()), inv_i(p.inv_i.data()), fixed(p.fixed.data()) {}
-  // Half a step of velocity Verlet's kick for grain i (fixed grains never move).
+        inv_m(p.inv_m.data()), inv_i(p.inv_i.data()) {}
+  // Half a step of velocity Verlet's kick for grain i. Fixed grains have 1/m = 1/I = 0
+  // (Particles::add), so they keep their velocity without a branch per grain.
   void kick(int i, double half) const {
-    if (fixed[i]) return;
     v[i] += (half * inv_m[i]) * f[i];
     w[i] += (half * inv_i[i]) * t[i];
   }
@@ -323,17 +322,27 @@ void World::external_forces(int begin, int end) {
   const Vec3* __restrict w = p_.w.data();
   const double* __restrict m = p_.m.data();
   const std::uint8_t* __restrict fixed = p_.fixed.data();
-  // sign(u) as a select: the damping's direction tests are unpredictable branches.
-  auto sign = [](double u) { return static_cast<double>(u > 0.0) - static_cast<double>(u < 0.0); };
-  for (int i = begin; i < end; ++i) {
-    if (fixed[i]) continue;
-    f[i] += m[i] * g;
-    if (alpha > 0.0) {
-      for (int a = 0; a < 3; ++a) {
-        f[i][a] -= alpha * std::abs(f[i][a]) * sign(v[i][a]);
-        t[i][a] -= alpha * std::abs(t[i][a]) * sign(w[i][a]);
-      }
-    }
+  if (g.squaredNorm() > 0.0)
+    for (int i = begin; i < end; ++i)
+      if (!fixed[i]) f[i] += m[i] * g;
+  if (alpha == 0.0) return;
+  // Cundall's local damping, -alpha |F| sign(v) per component, with sign(v) written
+  // as copysign times (v != 0): the direction of motion is an unpredictable branch.
+  // The loop runs over the components as one flat array so that it vectorises; it
+  // damps fixed grains' forces too, which moves nothing (1/m = 0) and is read by
+  // nothing (the unbalanced-force ratio skips fixed grains).
+  static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are read as flat doubles");
+  double* __restrict fc = f[0].data();
+  double* __restrict tc = t[0].data();
+  const double* __restrict vc = v[0].data();
+  const double* __restrict wc = w[0].data();
+  auto damp = [alpha](double force, double speed) {
+    return force - alpha * std::copysign(std::abs(force), speed) * static_cast<double>(speed != 0.0);
+  };
+#pragma omp simd
+  for (int k = 3 * begin; k < 3 * end; ++k) {
+    fc[k] = damp(fc[k], vc[k]);
+    tc[k] = damp(tc[k], wc[k]);
   }
 }
 
@@ -343,12 +352,14 @@ void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_
 void World::half_kick(int begin, int end, ThreadAcc& acc) {
   const double half = 0.5 * opt_.dt;
   const VerletArrays a(p_);
-  bool finite = true;
+  // One sum over the range: a NaN or an infinity anywhere makes it non-finite, and
+  // finite positions and speeds cannot overflow it. No test per grain, so no branch.
+  double sum = 0.0;
   for (int i = begin; i < end; ++i) {
     a.kick(i, half);
-    finite = finite && std::isfinite(a.x[i].sum() + a.v[i].sum() + a.w[i].sum());
+    sum += a.x[i].sum() + a.v[i].sum() + a.w[i].sum();
   }
-  acc.finite = finite;
+  acc.finite = std::isfinite(sum);
 }
 
 // One parallel region per force evaluation: pair contacts over interleaved row
@@ -432,33 +443,48 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   return finite;
 }
 
+// The first half-kick and the drift of every grain, with the Verlet-skin test folded
+// in when there is a list for these grains (`listed`); returns whether some grain has
+// used up half the skin. Periodic is a template argument so that the open box, the
+// common case, tests no axis per grain.
+template <bool Periodic>
+bool World::drift(bool listed) {
+  const int n = static_cast<int>(p_.size());
+  const double dt = opt_.dt, half = 0.5 * dt, skin = skin_;
+  const Domain dom = dom_;
+  const VerletArrays a(p_);
+  const double* r = p_.r.data();
+  const Vec3* xb = nl_.build_positions();
+  const double* rb = nl_.build_radii();
+  bool stale = false;
+#pragma omp parallel for schedule(static) num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
+  for (int i = 0; i < n; ++i) {
+    a.kick(i, half);
+    a.x[i] += dt * a.v[i];
+    if constexpr (Periodic) dom.wrap(a.x[i]);
+    if (!listed) continue;
+    Vec3 d = a.x[i] - xb[i];
+    if constexpr (Periodic) dom.min_image(d);
+    stale |= NeighborList::moved_too_far(d, r[i], rb[i], skin);
+  }
+  return stale;
+}
+
 // Two parallel regions a step: the first half-kick and drift (with the Verlet-skin
 // test folded in), then the force evaluation, which ends with each thread's second
 // half-kick of the grains it reduced.
 void World::step() {
   if (!forces_valid_) compute_forces();
   auto clock = std::chrono::steady_clock::now();
-  const int n = static_cast<int>(p_.size());
   const double dt = opt_.dt, half = 0.5 * dt;
-  const bool periodic = dom_.any_periodic();
 
   // Work done on the grains by moving walls over this step (trapezoidal rule).
   double wall_power_before = 0.0;
   for (const auto& wall : walls_) wall_power_before -= wall.force.dot(wall.velocity);
 
   const bool listed = nl_.built_for(p_.size());
-  bool stale = !listed;
-  const VerletArrays a(p_);
-  const double* r = p_.r.data();
-  const Vec3* xb = nl_.build_positions();
-  const double* rb = nl_.build_radii();
-#pragma omp parallel for schedule(static) num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
-  for (int i = 0; i < n; ++i) {
-    a.kick(i, half);
-    a.x[i] += dt * a.v[i];
-    if (periodic) dom_.wrap(a.x[i]);
-    stale = stale || (listed && NeighborList::moved_too_far(a.x[i], xb[i], r[i], rb[i], dom_, skin_));
-  }
+  const bool moved = dom_.any_periodic() ? drift<true>(listed) : drift<false>(listed);
+  const bool stale = !listed || moved;
   for (auto& wall : walls_) wall.point += dt * wall.velocity;
   times_.integrate += seconds_since(clock);
 

@@ -122,6 +122,8 @@ class World {
   bool evaluate_forces(bool rebuild, bool kick);
   void half_kick(int begin, int end, ThreadAcc& acc);
   template <bool Periodic>
+  bool drift(bool listed);
+  template <bool Periodic>
   void force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc);
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
