@@ -57,6 +57,11 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
 std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where) {
   if (!store.find_job(job)) throw jobs::JobError("--job", "no job named \"" + job + "\"");
   const auto rows = jobs::select_rows(store, job, where);
+  // The wrong kind of job is the first thing to say, before asking to pin a parameter.
+  for (const auto& r : rows)
+    if (!r.params.contains("confining_kpa") || !r.params.contains("theta_deg") || !r.params.contains("eta"))
+      throw jobs::JobError("--job", "job \"" + job + "\" has no confining_kpa, theta_deg and eta parameters (scene " + r.task.scene +
+                                        "); an envelope needs triaxial tasks");
   std::map<std::string, std::set<std::string>> seen;
   for (const auto& r : rows)
     for (const auto& [k, v] : r.params.items())
@@ -67,9 +72,6 @@ std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& jo
   std::map<std::pair<double, double>, PointEnvelope> by;
   int usable = 0;
   for (const auto& r : rows) {
-    if (!r.params.contains("confining_kpa") || !r.params.contains("theta_deg") || !r.params.contains("eta"))
-      throw jobs::JobError("--job", "job \"" + job + "\" has no confining_kpa, theta_deg and eta parameters (scene " + r.task.scene +
-                                        "); an envelope needs triaxial tasks");
     const double th = r.params["theta_deg"].get<double>(), et = r.params["eta"].get<double>();
     auto& pe = by[{th, et}];
     pe.theta = th;

@@ -108,6 +108,9 @@ int slurm(SlurmArgs a) {
   ::chmod(a.out.c_str(), 0755);
   std::cout << "wrote " << a.out << ": " << job.tasks.size() << " task(s) of job " << job.name << " in " << a.array
             << " shard(s) plus a merge into " << fs::absolute(a.db).string() << "\nsubmit with: bash " << a.out << "\n";
+  if (static_cast<std::size_t>(a.array) > job.tasks.size())
+    std::cerr << "note: " << a.array << " shards for " << job.tasks.size() << " task(s): shards " << job.tasks.size() + 1
+              << ".." << a.array << " will have nothing to run (--array " << job.tasks.size() << " is enough)\n";
   return kOk;
 }
 

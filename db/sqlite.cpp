@@ -3,6 +3,7 @@
 #include <sqlite3.h>
 
 #include <cmath>
+#include <filesystem>
 
 namespace demcal::db {
 namespace {
@@ -19,7 +20,12 @@ Connection::Connection(const std::string& path, bool read_only) : path_(path) {
     std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
     sqlite3_close(db_);
     db_ = nullptr;
-    throw DbError("cannot open database " + path + ": " + msg, rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT);
+    const auto dir = std::filesystem::absolute(path).parent_path();
+    if (rc == SQLITE_CANTOPEN && !std::filesystem::is_directory(dir))
+      msg = "directory " + dir.string() + " does not exist";
+    // The path is the user's input: a file SQLite cannot open is bad input (exit 2).
+    throw DbError("cannot open database " + path + ": " + msg,
+                  rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT || rc == SQLITE_CANTOPEN);
   }
   // Two runners share one file: wait for the other's write lock instead of failing.
   sqlite3_busy_timeout(db_, 30000);

@@ -42,7 +42,14 @@ double unix_now() {
 }
 
 Store::Store(const std::string& path, bool read_only) : path_(path), conn_(checked(path), read_only) {
-  if (read_only) return;
+  if (read_only) {
+    // An empty file (or one SQLite made but no run filled) has no tables to read:
+    // say so, instead of "no such table" from the first query.
+    Statement v = conn_.prepare("PRAGMA user_version");
+    if (!v.step() || v.int64(0) == 0)
+      throw DbError(path + " holds no demcal results (an empty database: run a job into it first)", true);
+    return;
+  }
   conn_.exec("PRAGMA journal_mode = WAL");
   conn_.exec("PRAGMA synchronous = NORMAL");  // WAL + NORMAL: durable across process kills
   conn_.exec("PRAGMA foreign_keys = ON");

@@ -7,6 +7,7 @@
 #include "validate.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <regex>
 #include <sstream>
@@ -131,12 +132,27 @@ Job parse_job(const std::string& text, const std::string& source) {
   return job;
 }
 
+namespace {
+JobError unreadable(const std::string& path) {
+  std::error_code ec;
+  std::string why;
+  if (!std::filesystem::exists(path, ec))
+    why = "no such file";
+  else if (std::filesystem::is_directory(path, ec))
+    why = "it is a directory";
+  else
+    why = "not readable (check its permissions)";
+  return JobError("", "cannot read job file " + path + ": " + why);
+}
+}  // namespace
+
 Job load_job_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw JobError("", "cannot read job file " + path);
+  std::error_code ec;
+  if (!in || std::filesystem::is_directory(path, ec)) throw unreadable(path);
   std::ostringstream text;
   text << in.rdbuf();
-  if (in.bad()) throw JobError("", "cannot read job file " + path);
+  if (in.bad()) throw unreadable(path);
   return parse_job(text.str(), path);
 }
 

@@ -98,7 +98,12 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   const auto mets = metric_columns(rows, metrics);
   t.header = {"task", "job", "status"};
   t.header.insert(t.header.end(), params.begin(), params.end());
-  t.header.insert(t.header.end(), mets.begin(), mets.end());
+  // A metric named like a parameter (the collision scene's `steps`) gets its own
+  // header, "metric.NAME": CSV readers key columns by header.
+  for (const auto& m : mets) {
+    const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() || m == "error";
+    t.header.push_back(taken ? "metric." + m : m);
+  }
   t.header.push_back("error");
   for (const auto& r : rows) {
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};

@@ -115,6 +115,52 @@ TEST(Cli, ForeignDatabasesAreRejectedUntouched) {
   EXPECT_FALSE(fs::exists(d.file("demcal-out")));
 }
 
+TEST(Cli, EmptyDatabaseFileIsBadInputAndLeftEmpty) {
+  TempDir d;
+  write(d.file("empty.db"), "");
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"status", "--db", "empty.db"}, {"query", "--db", "empty.db"},
+        {"fit", "--db", "empty.db", "--target", "phi_peak=41"}}) {
+    const Result r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 2) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find("holds no demcal results"), std::string::npos) << args[0] << ": " << r.err;
+  }
+  EXPECT_EQ(fs::file_size(d.file("empty.db")), 0u);
+}
+
+TEST(Cli, MissingJobFileAndDatabaseDirectorySayWhy) {
+  TempDir d;
+  Result r = run_demcal({"run", "nosuch.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("nosuch.json: no such file"), std::string::npos) << r.err;
+  fs::create_directories(d.path / "adir");
+  r = run_demcal({"validate", "adir"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("it is a directory"), std::string::npos) << r.err;
+  write(d.file("j.json"), collision_job("small", {0.1}));
+  r = run_demcal({"run", "j.json", "--db", "nope/x.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "nope"));
+}
+
+TEST(Cli, QueryHeadersAreUniqueAndFitSaysNoDataFirst) {
+  // The collision scene has a parameter and a metric both called `steps`.
+  TempDir d;
+  write(d.file("j.json"), collision_job("small", {0.05, 0.1}));
+  ASSERT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
+  Result r = run_demcal({"query", "--format", "csv"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string header = r.out.substr(0, r.out.find('\n'));
+  EXPECT_NE(header.find(",steps,"), std::string::npos) << header;
+  EXPECT_NE(header.find(",metric.steps,"), std::string::npos) << header;
+  // Two dt factors vary, but the job holds no phi_peak at all: that is the error.
+  r = run_demcal({"fit", "--target", "phi_peak=41.4"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("--where"), std::string::npos) << r.err;
+}
+
 TEST(Cli, PlotDrawsPngAndSvg) {
   TempDir d;
   write(d.file("j.json"), collision_job("plot", {0.1}));

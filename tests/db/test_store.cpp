@@ -193,3 +193,30 @@ TEST(Store, ReadOnlyOpenDoesNotCreate) {
   EXPECT_THROW({ Store s(d.file("missing.db"), true); }, DbError);
   EXPECT_FALSE(fs::exists(d.file("missing.db")));
 }
+
+TEST(Store, EmptyFileReadOnlyIsBadInputNotAMissingTable) {
+  // A 0-byte file is a valid empty SQLite database: reading it must say that it
+  // holds no results (bad input), not fail later on "no such table".
+  TempDir d;
+  { std::ofstream(d.file("empty.db")); }
+  try {
+    Store s(d.file("empty.db"), true);
+    FAIL() << "opened an empty database read-only";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input());
+    EXPECT_NE(std::string(e.what()).find("holds no demcal results"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(fs::file_size(d.file("empty.db")), 0u);
+}
+
+TEST(Store, DatabaseInAMissingDirectoryIsBadInputNamingIt) {
+  TempDir d;
+  try {
+    Store s(d.file("nope/x.db"), false);
+    FAIL() << "created a database in a missing directory";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input());
+    EXPECT_NE(std::string(e.what()).find("does not exist"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(d.file("nope")));
+}
