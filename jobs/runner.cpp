@@ -6,8 +6,10 @@
 #include "worker.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <deque>
 #include <filesystem>
 #include <iostream>
@@ -91,9 +93,25 @@ void Runner::prepare() {
   const int todo = std::max<int>(1, static_cast<int>(queue_.size()));
   // Fewer tasks than cores: give each task's engine the spare cores as threads.
   // Otherwise one thread per task: the engine synchronises every step, and
-  // oversubscribed cores turn each barrier into a scheduler time slice.
+  // oversubscribed cores turn each barrier into a scheduler time slice. "Spare"
+  // means not busy with other work either (the 1-minute load average): a
+  // two-thread task beside another program ran 50x slower than a one-thread one.
   const int parallel = std::min(workers_, todo);
-  threads_ = job_.threads > 0 ? job_.threads : (todo < cores ? std::max(1, cores / parallel) : 1);
+  if (job_.threads > 0) {
+    threads_ = job_.threads;
+  } else if (todo < cores) {
+    double load = 0.0;
+    const int busy = ::getloadavg(&load, 1) == 1 ? static_cast<int>(std::lround(load)) : 0;
+    threads_ = std::max(1, std::max(parallel, cores - busy) / parallel);
+    if (threads_ < cores / parallel) {
+      char avg[32];
+      std::snprintf(avg, sizeof avg, "%.1f", load);
+      *opt_.log << "engine threads per task: " << threads_ << " (load average " << avg << " on " << cores
+                << " cores; set \"threads\" in the job to choose)\n";
+    }
+  } else {
+    threads_ = 1;
+  }
   std::filesystem::create_directories(dir_);
 }
 
