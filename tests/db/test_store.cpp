@@ -57,6 +57,18 @@ demcal::db::Outcome done_with(double metric) {
   return o;
 }
 
+// `open` must throw a DbError flagged as bad input whose message contains `says`.
+template <class F>
+void expect_bad_input(F open, const std::string& says) {
+  try {
+    open();
+    ADD_FAILURE() << "no error; expected one saying \"" << says << "\"";
+  } catch (const DbError& e) {
+    EXPECT_TRUE(e.bad_input()) << e.what();
+    EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 
 TEST(Store, CreatesSchemaWithVersionAndWal) {
@@ -199,24 +211,12 @@ TEST(Store, EmptyFileReadOnlyIsBadInputNotAMissingTable) {
   // holds no results (bad input), not fail later on "no such table".
   TempDir d;
   { std::ofstream(d.file("empty.db")); }
-  try {
-    Store s(d.file("empty.db"), true);
-    FAIL() << "opened an empty database read-only";
-  } catch (const DbError& e) {
-    EXPECT_TRUE(e.bad_input());
-    EXPECT_NE(std::string(e.what()).find("holds no demcal results"), std::string::npos) << e.what();
-  }
+  expect_bad_input([&] { Store s(d.file("empty.db"), true); }, "holds no demcal results");
   EXPECT_EQ(fs::file_size(d.file("empty.db")), 0u);
 }
 
 TEST(Store, DatabaseInAMissingDirectoryIsBadInputNamingIt) {
   TempDir d;
-  try {
-    Store s(d.file("nope/x.db"), false);
-    FAIL() << "created a database in a missing directory";
-  } catch (const DbError& e) {
-    EXPECT_TRUE(e.bad_input());
-    EXPECT_NE(std::string(e.what()).find("does not exist"), std::string::npos) << e.what();
-  }
+  expect_bad_input([&] { Store s(d.file("nope/x.db"), false); }, "does not exist");
   EXPECT_FALSE(fs::exists(d.file("nope")));
 }
