@@ -16,7 +16,9 @@ class Observer {
   virtual void on_progress(double /*fraction*/) {}
   virtual void on_series_row(const std::string& /*series*/, const std::vector<std::string>& /*columns*/,
                              const std::vector<double>& /*row*/) {}
-  // Called at the points the scene's config asks for snapshots.
+  // Called at each scene's fixed points (collision: "initial", "final"; triaxial:
+  // "prepared", then every 0.05 of axial strain, "final"; repose: "column",
+  // "heap"). The observer decides whether to keep them: they are big.
   virtual void on_snapshot(const std::string& /*label*/, double /*time*/, const Particles& /*p*/) {}
 };
 

@@ -2,8 +2,9 @@
 // Per-task HDF5 files: every time series as a group /series/<name> holding one
 // chunked, deflated 1-D dataset per column (the order is in the group's "columns"
 // attribute), the task parameters as the root attribute "params", and optional
-// particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz)
-// that ParaView's H5Part reader opens.
+// particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz,
+// with attributes TimeValue and label) that ParaView's H5Part reader opens. The
+// scenes' snapshot points are listed in engine/observer.hpp.
 #include "engine/observer.hpp"
 
 #include <nlohmann/json.hpp>

@@ -126,12 +126,14 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   try {
     world.refresh();
     sample();
+    if (obs) obs->on_snapshot("initial", world.time(), world.particles());
     while (world.step_count() < total_steps) {
       const long chunk = std::min(sample_every, total_steps - world.step_count());
       world.run(chunk);
       sample();
       if (obs) obs->on_progress(static_cast<double>(world.step_count()) / static_cast<double>(total_steps));
     }
+    if (obs) obs->on_snapshot("final", world.time(), world.particles());
   } catch (const InstabilityError& e) {
     res.outcome.status = SceneStatus::unstable;
     res.outcome.failed_stage = "collision";

@@ -444,6 +444,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     };
     w.refresh();
     sample();
+    if (obs) obs->on_snapshot("column", w.time(), w.particles());
     int quiet = 0;
     bool at_rest = false;
     const long drag_every = 100;
@@ -478,6 +479,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     }
     res.steps = steps_total;
     const Particles& p = w.particles();
+    if (obs) obs->on_snapshot("heap", w.time(), p);
     res.final_particles = p;
     res.final_particles.f.clear();  // forces and torques are not part of the record
     res.final_particles.t.clear();

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <sstream>
 
@@ -459,6 +460,9 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
 
     world.refresh();
     sample();
+    if (obs) obs->on_snapshot("prepared", world.time(), world.particles());
+    const double snapshot_strain = 0.05;  // ParaView frames: enough to see a shear band form
+    double next_snapshot = snapshot_strain;
     double next = cfg.sample_strain;
     const double dstrain = cfg.strain_rate * world.dt();  // per step
     const long est_steps = static_cast<long>(std::ceil(cfg.axial_strain / dstrain));
@@ -475,8 +479,15 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
         sample();
         next += cfg.sample_strain;
         if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
+        if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < cfg.axial_strain - 1e-12) {
+          char label[32];
+          std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
+          obs->on_snapshot(label, world.time(), world.particles());
+          next_snapshot += snapshot_strain;
+        }
       }
     }
+    if (obs) obs->on_snapshot("final", world.time(), world.particles());
     rig.stop_walls();
     res.shear_stress_error_mean = err_n ? err_sum / static_cast<double>(err_n) : 0.0;
     {

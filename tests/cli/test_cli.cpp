@@ -1,5 +1,7 @@
 #include "cli_util.hpp"
 
+#include <H5Cpp.h>
+
 using namespace demcal::test;
 using nlohmann::json;
 
@@ -159,6 +161,39 @@ TEST(Cli, QueryHeadersAreUniqueAndFitSaysNoDataFirst) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
   EXPECT_EQ(r.err.find("--where"), std::string::npos) << r.err;
+}
+
+TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
+  TempDir d;
+  json j = json::parse(collision_job("snap", {0.1}));
+  j["snapshots"] = true;
+  write(d.file("snap.json"), j.dump());
+  write(d.file("plain.json"), collision_job("plain", {0.05}));
+  ASSERT_EQ(run_demcal({"run", "snap.json"}, d.path.string()).rc, 0);
+  ASSERT_EQ(run_demcal({"run", "plain.json"}, d.path.string()).rc, 0);
+  const auto snap = tasks_of(d.file("demcal.db"), "snap");
+  const auto plain = tasks_of(d.file("demcal.db"), "plain");
+  ASSERT_EQ(snap.size(), 1u);
+  ASSERT_EQ(plain.size(), 1u);
+  H5::H5File f((d.path / "demcal-out" / "snap" / (std::to_string(snap[0].id) + ".h5")).string(), H5F_ACC_RDONLY);
+  for (const auto& [step, label] : {std::pair<const char*, const char*>{"Step#0", "initial"}, {"Step#1", "final"}}) {
+    ASSERT_TRUE(f.nameExists(step)) << step;
+    H5::Group g = f.openGroup(step);
+    std::string got;
+    H5::Attribute a = g.openAttribute("label");
+    a.read(a.getStrType(), got);
+    EXPECT_EQ(got, label);
+    EXPECT_TRUE(g.attrExists("TimeValue"));
+    for (const char* col : {"x", "y", "z", "radius", "vx", "vy", "vz"}) {
+      hsize_t n = 0;
+      g.openDataSet(col).getSpace().getSimpleExtentDims(&n);
+      EXPECT_EQ(n, 30u) << step << "/" << col;  // every grain of the 30-grain job
+    }
+  }
+  EXPECT_FALSE(f.nameExists("Step#2"));
+  H5::H5File p((d.path / "demcal-out" / "plain" / (std::to_string(plain[0].id) + ".h5")).string(), H5F_ACC_RDONLY);
+  EXPECT_FALSE(p.nameExists("Step#0"));
+  EXPECT_TRUE(p.nameExists("series"));
 }
 
 TEST(Cli, PlotDrawsPngAndSvg) {

@@ -2,11 +2,13 @@
 // failure reporting, on small samples (400 grains) sheared faster than the seed
 // (3e-4 /s, to eps1 = 0.15) so that the file runs in well under a minute or two.
 #include "engine/errors.hpp"
+#include "engine/particles.hpp"
 #include "engine/scenes/triaxial.hpp"
 #include "engine/servo_wall.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -345,4 +347,23 @@ TEST(TriaxialScene, ShearDampingIsADiagnosticThatIsRecordedAndWarned) {
   std::printf("[ report   ] mean kinetic energy in shear: undamped %.4g J, damped 0.3: %.4g J\n", mean_ke(plain),
               mean_ke(damped));
   EXPECT_LT(mean_ke(damped), 0.7 * mean_ke(plain));
+}
+
+TEST(TriaxialScene, SnapshotsAtPreparationEveryFivePercentAndTheEnd) {
+  struct Recorder : Observer {
+    std::vector<std::string> labels;
+    std::vector<double> times;
+    std::size_t grains = 0;
+    void on_snapshot(const std::string& label, double time, const Particles& p) override {
+      labels.push_back(label);
+      times.push_back(time);
+      grains = p.size();
+    }
+  } rec;
+  const TriaxialResult r = run_triaxial(short_loose(0.12, 0.01), &rec);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  EXPECT_EQ(rec.labels, (std::vector<std::string>{"prepared", "eps1=0.05", "eps1=0.10", "final"}));
+  EXPECT_EQ(rec.grains, 200u);
+  EXPECT_TRUE(std::is_sorted(rec.times.begin(), rec.times.end()));
+  EXPECT_LT(rec.times.front(), rec.times.back());
 }
