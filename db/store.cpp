@@ -2,8 +2,11 @@
 
 #include "schema.hpp"
 
+#include <sqlite3.h>
+
 #include <chrono>
 #include <set>
+#include <thread>
 
 namespace demcal::db {
 namespace {
@@ -50,7 +53,18 @@ Store::Store(const std::string& path, bool read_only) : path_(path), conn_(check
       throw DbError(path + " holds no demcal results (an empty database: run a job into it first)", true);
     return;
   }
-  conn_.exec("PRAGMA journal_mode = WAL");
+  // Switching a new file to WAL takes an exclusive lock, and SQLite may answer BUSY
+  // at once, without the busy handler, while a second runner is creating the same
+  // file (test Runner.TwoJobsConcurrentlyOnOneDatabase met it 1 run in ~20): retry.
+  for (int tries = 0;; ++tries) {
+    const int rc = sqlite3_exec(conn_.handle(), "PRAGMA journal_mode = WAL", nullptr, nullptr, nullptr);
+    if (rc == SQLITE_OK) break;
+    if ((rc != SQLITE_BUSY && rc != SQLITE_LOCKED) || tries >= 1500) {  // 30 s, as the busy timeout
+      conn_.exec("PRAGMA journal_mode = WAL");  // throws with SQLite's message
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
   conn_.exec("PRAGMA synchronous = NORMAL");  // WAL + NORMAL: durable across process kills
   conn_.exec("PRAGMA foreign_keys = ON");
   migrate(conn_);

@@ -77,12 +77,21 @@ std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool 
 }
 
 std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, const std::vector<std::string>& asked) {
-  if (!asked.empty()) return asked;
-  std::vector<std::string> out;
+  std::vector<std::string> stored;
   for (const auto& r : rows)
     for (const auto& m : r.metrics)
-      if (std::find(out.begin(), out.end(), m.first) == out.end()) out.push_back(m.first);
-  return out;
+      if (std::find(stored.begin(), stored.end(), m.first) == stored.end()) stored.push_back(m.first);
+  if (asked.empty()) return stored;
+  // A name no finished task stores is a typo, as an unknown --where key is (while
+  // nothing has finished, every metric is legitimately absent).
+  if (!stored.empty())
+    for (const auto& a : asked)
+      if (std::find(stored.begin(), stored.end(), a) == stored.end()) {
+        std::string known;
+        for (const auto& k : stored) known += (known.empty() ? "" : ", ") + k;
+        throw JobError("--metrics", "no task stores a metric \"" + a + "\" (stored: " + known + ")");
+      }
+  return asked;
 }
 
 double metric_of(const ResultRow& r, const std::string& name) {

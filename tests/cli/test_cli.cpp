@@ -78,6 +78,9 @@ TEST(Cli, RunQueryStatusAndResume) {
   EXPECT_NE(r.out.find(",dt,drift_per_million_steps,"), std::string::npos) << r.out;
 
   EXPECT_EQ(run_demcal({"query", "--where", "nosuch=1"}, d.path.string()).rc, 2);
+  r = run_demcal({"query", "--metrics", "dt,nosuch"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no task stores a metric \"nosuch\""), std::string::npos) << r.err;
   EXPECT_EQ(run_demcal({"query", "--where", "novalue"}, d.path.string()).rc, 2);
   EXPECT_EQ(run_demcal({"query", "--format", "xml"}, d.path.string()).rc, 2);
 
