@@ -26,6 +26,7 @@ class Observer {
 struct Series {
   std::string name;
   std::vector<std::string> columns;
+  std::vector<std::string> units;  // one per column (SI; "1" for a pure number), or empty
   std::vector<std::vector<double>> rows;
 
   // Appends a row and forwards it to the observer, if any.

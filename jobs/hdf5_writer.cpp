@@ -1,5 +1,7 @@
 #include "hdf5_writer.hpp"
 
+#include "physics_version.hpp"
+
 #include "engine/particles.hpp"
 
 #include <H5Cpp.h>
@@ -53,6 +55,10 @@ void write_series(H5::Group& root, const engine::Series& s) {
     col.reserve(s.rows.size());
     for (const auto& row : s.rows) col.push_back(c < row.size() ? row[c] : 0.0);
     write_column(g, s.columns[c], col);
+    if (c < s.units.size()) {
+      H5::DataSet ds = g.openDataSet(s.columns[c]);
+      string_attr(ds, "units", s.units[c]);
+    }
   }
 }
 
@@ -60,13 +66,13 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
   H5::Group g = f.createGroup("Step#" + std::to_string(step));
   double_attr(g, "TimeValue", s.time);
   string_attr(g, "label", s.label.empty() ? "snapshot" : s.label);
-  write_column(g, "x", s.x);
-  write_column(g, "y", s.y);
-  write_column(g, "z", s.z);
-  write_column(g, "radius", s.radius);
-  write_column(g, "vx", s.vx);
-  write_column(g, "vy", s.vy);
-  write_column(g, "vz", s.vz);
+  const std::pair<const char*, const std::vector<double>*> cols[] = {
+      {"x", &s.x}, {"y", &s.y}, {"z", &s.z}, {"radius", &s.radius}, {"vx", &s.vx}, {"vy", &s.vy}, {"vz", &s.vz}};
+  for (const auto& [name, data] : cols) {
+    write_column(g, name, *data);
+    H5::DataSet ds = g.openDataSet(name);
+    string_attr(ds, "units", name[0] == 'v' ? "m/s" : "m");
+  }
 }
 
 }  // namespace
@@ -88,11 +94,13 @@ void SnapshotObserver::on_snapshot(const std::string& label, double time, const 
   snapshots.push_back(std::move(s));
 }
 
-void write_task_hdf5(const std::string& path, const nlohmann::json& params, const std::vector<engine::Series>& series,
-                     const std::vector<Snapshot>& snapshots) {
+void write_task_hdf5(const std::string& path, const std::string& scene, const nlohmann::json& params,
+                     const std::vector<engine::Series>& series, const std::vector<Snapshot>& snapshots) {
   H5::Exception::dontPrint();
   H5::H5File f(path, H5F_ACC_TRUNC);
+  string_attr(f, "scene", scene);
   string_attr(f, "params", params.dump());
+  double_attr(f, "physics_version", kPhysicsVersion);
   H5::Group root = f.createGroup("series");
   for (const auto& s : series) write_series(root, s);
   for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);

@@ -30,8 +30,10 @@ class SnapshotObserver : public engine::Observer {
   bool keep_;
 };
 
-void write_task_hdf5(const std::string& path, const nlohmann::json& params, const std::vector<engine::Series>& series,
-                     const std::vector<Snapshot>& snapshots);
+// Root attributes: scene, params (JSON) and physics_version; each series column and
+// snapshot dataset carries a "units" attribute (SI; "1" for a pure number).
+void write_task_hdf5(const std::string& path, const std::string& scene, const nlohmann::json& params,
+                     const std::vector<engine::Series>& series, const std::vector<Snapshot>& snapshots);
 
 // Reads one series back (for plotting); throws std::runtime_error when absent.
 engine::Series read_series(const std::string& path, const std::string& name);

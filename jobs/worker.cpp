@@ -47,7 +47,7 @@ nlohmann::json run_scene(const WorkerTask& t) {
   if (!scene) throw std::runtime_error("unknown scene " + t.scene);
   SnapshotObserver obs(t.snapshots);
   const SceneOutput r = scene->run(t.params, RunContext{t.threads, &obs});
-  write_task_hdf5(t.h5_path, t.params, r.series, obs.snapshots);
+  write_task_hdf5(t.h5_path, t.scene, t.params, r.series, obs.snapshots);
   out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
   nlohmann::json metrics = nlohmann::json::array();
   for (const auto& [name, value] : r.metrics) metrics.push_back({name, encode(value)});

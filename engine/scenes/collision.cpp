@@ -67,6 +67,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   CollisionResult res;
   res.energy.name = "energy";
   res.energy.columns = {"step", "time", "kinetic", "elastic", "total"};
+  res.energy.units = {"1", "s", "J", "J", "J"};
 
   Material mat = cfg.material;
   if (!cfg.keep_friction) {

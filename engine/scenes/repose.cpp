@@ -210,10 +210,13 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   ReposeResult res;
   res.energy.name = "energy";
   res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x"};
+  res.energy.units = {"s", "J", "J", "J", "m"};
   res.prep.name = "prep";
   res.prep.columns = {"time", "ke_per_grain", "ke_flow_per_grain"};
+  res.prep.units = {"s", "J", "J"};
   res.profile.name = "profile";
   res.profile.columns = {"x", "h", "count"};
+  res.profile.units = {"m", "m", "1"};
   res.threads = cfg.threads;
 
   const Material& mat = cfg.material;

@@ -327,6 +327,8 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   res.series.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
                         "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
                         "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step"};
+  res.series.units = {"1",  "1",  "1",  "1",   "1",   "1",  "Pa", "Pa", "Pa", "Pa", "Pa", "1", "deg",
+                      "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1"};
 
   // Sample: diameters uniform in [d_min, d_max], random insertion at a low solid fraction.
   const Material& mat = cfg.material;

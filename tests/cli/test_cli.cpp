@@ -194,6 +194,18 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
     }
   }
   EXPECT_FALSE(f.nameExists("Step#2"));
+  // Self-describing: the scene at the root, a unit on every dataset.
+  auto text = [](const H5::H5Object& o, const char* name) {
+    std::string v;
+    H5::Attribute a = o.openAttribute(name);
+    a.read(a.getStrType(), v);
+    return v;
+  };
+  EXPECT_EQ(text(f, "scene"), "collision");
+  EXPECT_TRUE(f.attrExists("physics_version"));
+  EXPECT_EQ(text(f.openDataSet("series/energy/time"), "units"), "s");
+  EXPECT_EQ(text(f.openDataSet("series/energy/kinetic"), "units"), "J");
+  EXPECT_EQ(text(f.openDataSet("Step#0/vx"), "units"), "m/s");
   H5::H5File p((d.path / "demcal-out" / "plain" / (std::to_string(plain[0].id) + ".h5")).string(), H5F_ACC_RDONLY);
   EXPECT_FALSE(p.nameExists("Step#0"));
   EXPECT_TRUE(p.nameExists("series"));

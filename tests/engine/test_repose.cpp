@@ -202,6 +202,8 @@ TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
     EXPECT_NE(k, "runout_m");
   }
   EXPECT_FALSE(r.energy.rows.empty());
+  for (const Series* s : {&r.energy, &r.prep, &r.profile})  // HDF5 writes one unit per column
+    EXPECT_EQ(s->units.size(), s->columns.size()) << s->name;
 }
 
 TEST(ReposeScene, FrictionRaisesTheAngleAndRollingResistanceRaisesItFurther) {

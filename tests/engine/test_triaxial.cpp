@@ -247,6 +247,10 @@ TEST(TriaxialScene, SeriesHasTheDocumentedColumnsAndSampling) {
                         "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "z_all", "z_mech", "kinetic", "ufr",
                         "inertial"})
     EXPECT_NO_THROW(r.series.column(c)) << c;
+  ASSERT_EQ(r.series.units.size(), r.series.columns.size());  // HDF5 writes one unit per column
+  EXPECT_EQ(r.series.units[r.series.column("sigma1")], "Pa");
+  EXPECT_EQ(r.series.units[r.series.column("phi_mob_deg")], "deg");
+  EXPECT_EQ(r.series.units[r.series.column("time")], "s");
   // One row at eps1 = 0 and one per 0.0025 of strain up to 0.15.
   EXPECT_NEAR(static_cast<double>(r.series.rows.size()), 61.0, 1.0);
   EXPECT_NEAR(col(r, r.series.rows.size() - 1, "eps1"), 0.15, 1e-4);
