@@ -119,6 +119,8 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
     for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
     line.push_back(r.task.error);
+    if (for_reading)  // a table row is one line: an error message's line breaks become spaces
+      std::replace_if(line.back().begin(), line.back().end(), [](char ch) { return ch == '\n' || ch == '\r'; }, ' ');
     t.rows.push_back(std::move(line));
   }
   return t;

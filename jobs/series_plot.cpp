@@ -60,6 +60,11 @@ std::string gnuplot_png_terminal(int width, int height) {
 void plot_series(const PlotRequest& r) {
   const std::string ext = extension_of(r.out);
   if (ext != ".png" && ext != ".svg") throw JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
+  // The file is the run's artifact, not the user's input: a missing one is a
+  // runtime failure (exit 1) that says so, not an HDF5 open error blamed on --series.
+  std::error_code ec;
+  if (!std::filesystem::exists(r.h5_path, ec))
+    throw std::runtime_error("the task's HDF5 file " + r.h5_path + " does not exist (moved or deleted since the run?)");
   engine::Series s;
   try {
     s = read_series(r.h5_path, r.series);

@@ -228,4 +228,9 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   EXPECT_NE(r.err.find("nope"), std::string::npos);
   r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  fs::remove(d.path / "demcal-out" / "plot" / (id + ".h5"));  // the artifact went missing after the run
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "g.png"}, d.path.string());
+  EXPECT_EQ(r.rc, 1);
+  EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("g.png")));
 }
