@@ -6,9 +6,32 @@
 #include <iostream>
 
 namespace demcal::cli {
+namespace {
+
+// Why tasks failed, a few per job (their first line): the counts alone send the
+// user to `query` for the reason.
+void print_failures(db::Store& store, const db::StatusCounts& counts) {
+  constexpr int kShown = 3;
+  for (const auto& [name, by] : counts) {
+    const auto it = by.find("failed");
+    if (it == by.end() || it->second == 0) continue;
+    int shown = 0;
+    for (const auto& t : store.tasks(name)) {
+      if (t.status != "failed" || shown == kShown) continue;
+      std::string why = t.error.substr(0, t.error.find('\n'));
+      if (why.size() > 200) why = why.substr(0, 197) + "...";
+      std::cout << name << ": task " << t.id << " failed: " << why << "\n";
+      ++shown;
+    }
+    if (it->second > kShown)
+      std::cout << name << ": " << it->second - kShown << " more failed (demcal query --job " << name << ")\n";
+  }
+}
+
+}  // namespace
 
 void add_status(CLI::App& app, int& exit_code) {
-  auto* cmd = app.add_subcommand("status", "Task counts per status, per job");
+  auto* cmd = app.add_subcommand("status", "Task counts per status, per job, and the reason of up to three failed tasks per job");
   auto db = std::make_shared<std::string>("demcal.db");
   auto job = std::make_shared<std::string>();
   cmd->add_option("--db", *db, "SQLite database")->capture_default_str();
@@ -39,6 +62,7 @@ void add_status(CLI::App& app, int& exit_code) {
         }
         std::cout << std::setw(9) << total << "\n";
       }
+      print_failures(store, counts);
       return kOk;
     });
   });

@@ -29,6 +29,11 @@ TEST(Runner, CrashingWorkerFailsOnlyItsTask) {
   EXPECT_EQ(rows[1].status, "failed");
   EXPECT_NE(rows[1].error.find("SIGABRT"), std::string::npos) << rows[1].error;
   EXPECT_EQ(rows[1].attempts, 1);
+  // status says why, not only how many.
+  const Result st = run_demcal({"status"}, d.path.string());
+  EXPECT_EQ(st.rc, 0) << st.err;
+  EXPECT_NE(st.out.find("crash: task " + std::to_string(rows[1].id) + " failed: "), std::string::npos) << st.out;
+  EXPECT_NE(st.out.find("SIGABRT"), std::string::npos) << st.out;
   // Failed tasks stay failed on a plain re-run, and run again on request.
   EXPECT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 1);
   EXPECT_EQ(tasks_of(d.file("demcal.db"), "crash")[1].attempts, 1);
