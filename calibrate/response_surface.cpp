@@ -154,23 +154,22 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
   }
 
   // No task holding the metric is the first thing to say: asking to pin a parameter
-  // first would only lead to this message one command later.
-  auto no_data = [&] {
+  // first would only lead to this message one command later. (Past this check some
+  // grid point has a value, so the surface below is never empty.)
+  if (std::none_of(rows.begin(), rows.end(), [&](const Row& row) {
+        return row.r.task.status == "done" && metric_value(spec, row.r.metrics).has_value();
+      })) {
     int done = 0, failed = 0;
     for (const auto& row : rows) {
       done += row.r.task.status == "done";
       failed += row.r.task.status == "failed";
     }
     const int unfinished = static_cast<int>(rows.size()) - done - failed;
-    return JobError("--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
-                                 " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
-                                 " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
-                                 std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
-  };
-  if (std::none_of(rows.begin(), rows.end(), [&](const Row& row) {
-        return row.r.task.status == "done" && metric_value(spec, row.r.metrics).has_value();
-      }))
-    throw no_data();
+    throw JobError("--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
+                                " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
+                                " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
+                                std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
+  }
 
   // Only replicas may be averaged: any other parameter that varies must be pinned.
   std::map<std::string, std::set<std::string>> seen;
@@ -222,7 +221,6 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
   rs.thetas.assign(thetas.begin(), thetas.end());
   rs.etas.assign(etas.begin(), etas.end());
   rs.summarise();
-  if (rs.with_data() == 0) throw no_data();
   return rs;
 }
 

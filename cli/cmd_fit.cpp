@@ -82,6 +82,9 @@ void add_fit(CLI::App& app, int& exit_code) {
       for (const auto& w : a->where) req.where.push_back(jobs::parse_where(w));
       req.jobs = a->jobs;
       require_db(a->db);
+      // Opened read-only first: a foreign, newer or empty file is reported before
+      // the read-write open would give it a schema.
+      { db::Store probe(a->db, /*read_only=*/true); }
       db::Store store(a->db);
       calibrate::Calibration cal = calibrate::calibrate(store, req);
       std::int64_t id = calibrate::store_fit(store, req, cal, 0);

@@ -17,11 +17,11 @@ void print_failures(db::Store& store, const db::StatusCounts& counts) {
     if (it == by.end() || it->second == 0) continue;
     int shown = 0;
     for (const auto& t : store.tasks(name)) {
-      if (t.status != "failed" || shown == kShown) continue;
+      if (t.status != "failed") continue;
       std::string why = t.error.substr(0, t.error.find('\n'));
       if (why.size() > 200) why = why.substr(0, 197) + "...";
       std::cout << name << ": task " << t.id << " failed: " << why << "\n";
-      ++shown;
+      if (++shown == kShown) break;
     }
     if (it->second > kShown)
       std::cout << name << ": " << it->second - kShown << " more failed (demcal query --job " << name << ")\n";

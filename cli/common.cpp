@@ -1,7 +1,6 @@
 #include "common.hpp"
 
 #include "db/sqlite.hpp"
-#include "db/store.hpp"
 #include "jobs/job_error.hpp"
 
 #include <filesystem>
@@ -33,9 +32,6 @@ std::string default_out_dir(const std::string& db_path) {
 void require_db(const std::string& db_path) {
   if (!std::filesystem::exists(db_path))
     throw jobs::JobError("--db", "no database at " + db_path + " (run a job first, or pass --db FILE)");
-  // Opened read-only first: a foreign, newer or empty file is reported before a
-  // command that writes (fit) would give it a schema.
-  db::Store probe(db_path, /*read_only=*/true);
 }
 
 }  // namespace demcal::cli

@@ -315,7 +315,6 @@ void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
 void World::external_forces(int begin, int end) {
   const Vec3 g = opt_.gravity;
   const double alpha = opt_.local_damping;
-  if (g.squaredNorm() == 0.0 && alpha == 0.0) return;
   Vec3* __restrict f = p_.f.data();
   Vec3* __restrict t = p_.t.data();
   const Vec3* __restrict v = p_.v.data();

@@ -13,7 +13,7 @@
 namespace demcal::jobs {
 namespace {
 
-void write_column(H5::Group& g, const std::string& name, const std::vector<double>& data) {
+H5::DataSet write_column(H5::Group& g, const std::string& name, const std::vector<double>& data) {
   const hsize_t n = data.size();
   H5::DataSpace space(1, &n);
   H5::DSetCreatPropList props;
@@ -25,6 +25,7 @@ void write_column(H5::Group& g, const std::string& name, const std::vector<doubl
   }
   H5::DataSet ds = g.createDataSet(name, H5::PredType::NATIVE_DOUBLE, space, props);
   if (n > 0) ds.write(data.data(), H5::PredType::NATIVE_DOUBLE);
+  return ds;
 }
 
 void string_attr(H5::H5Object& obj, const std::string& name, const std::string& value) {
@@ -54,11 +55,8 @@ void write_series(H5::Group& root, const engine::Series& s) {
     std::vector<double> col;
     col.reserve(s.rows.size());
     for (const auto& row : s.rows) col.push_back(c < row.size() ? row[c] : 0.0);
-    write_column(g, s.columns[c], col);
-    if (c < s.units.size()) {
-      H5::DataSet ds = g.openDataSet(s.columns[c]);
-      string_attr(ds, "units", s.units[c]);
-    }
+    H5::DataSet ds = write_column(g, s.columns[c], col);
+    if (c < s.units.size()) string_attr(ds, "units", s.units[c]);
   }
 }
 
@@ -66,12 +64,16 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
   H5::Group g = f.createGroup("Step#" + std::to_string(step));
   double_attr(g, "TimeValue", s.time);
   string_attr(g, "label", s.label.empty() ? "snapshot" : s.label);
-  const std::pair<const char*, const std::vector<double>*> cols[] = {
-      {"x", &s.x}, {"y", &s.y}, {"z", &s.z}, {"radius", &s.radius}, {"vx", &s.vx}, {"vy", &s.vy}, {"vz", &s.vz}};
-  for (const auto& [name, data] : cols) {
-    write_column(g, name, *data);
-    H5::DataSet ds = g.openDataSet(name);
-    string_attr(ds, "units", name[0] == 'v' ? "m/s" : "m");
+  struct Column {
+    const char* name;
+    const std::vector<double>* data;
+    const char* units;
+  };
+  const Column cols[] = {{"x", &s.x, "m"},         {"y", &s.y, "m"},   {"z", &s.z, "m"},  {"radius", &s.radius, "m"},
+                         {"vx", &s.vx, "m/s"}, {"vy", &s.vy, "m/s"}, {"vz", &s.vz, "m/s"}};
+  for (const Column& c : cols) {
+    H5::DataSet ds = write_column(g, c.name, *c.data);
+    string_attr(ds, "units", c.units);
   }
 }
 

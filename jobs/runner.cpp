@@ -102,7 +102,7 @@ void Runner::prepare() {
   } else if (todo < cores) {
     double load = 0.0;
     const int busy = ::getloadavg(&load, 1) == 1 ? static_cast<int>(std::lround(load)) : 0;
-    threads_ = std::max(1, std::max(parallel, cores - busy) / parallel);
+    threads_ = std::max(parallel, cores - busy) / parallel;  // >= 1
     if (threads_ < cores / parallel) {
       char avg[32];
       std::snprintf(avg, sizeof avg, "%.1f", load);
