@@ -106,6 +106,8 @@ inline void spring_step(double& hx, double& hy, double& hz, double k_dt, double 
 
 // Applies the law to lanes [0, b.count). Friction: Ks > 0 and tan(theta) used;
 // Rolling: the rolling spring is active; Twist: it also resists relative twist.
+// Without friction only the force along the normal and the overlap are written (no
+// torques, no history: the caller neither reads nor stores them).
 template <bool Friction, bool Rolling, bool Twist>
 void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
   static_assert(Friction || !Rolling, "rolling resistance needs the tangential spring");
@@ -180,23 +182,18 @@ void pair_batch_law(const ContactParams& p, double dt, PairBatch& b) {
         b.mry[l] = 0.0;
         b.mrz[l] = 0.0;
       }
-    } else {
-      b.fsx[l] = 0.0;
-      b.fsy[l] = 0.0;
-      b.fsz[l] = 0.0;
-      b.mrx[l] = 0.0;
-      b.mry[l] = 0.0;
-      b.mrz[l] = 0.0;
     }
     b.fx[l] = fx;
     b.fy[l] = fy;
     b.fz[l] = fz;
-    b.tix[l] = tix;
-    b.tiy[l] = tiy;
-    b.tiz[l] = tiz;
-    b.tjx[l] = tjx;
-    b.tjy[l] = tjy;
-    b.tjz[l] = tjz;
+    if constexpr (Friction) {
+      b.tix[l] = tix;
+      b.tiy[l] = tiy;
+      b.tiz[l] = tiz;
+      b.tjx[l] = tjx;
+      b.tjy[l] = tjy;
+      b.tjz[l] = tjz;
+    }
   }
 }
 

@@ -69,6 +69,14 @@ World::World(Particles particles, std::vector<Wall> walls, const Domain& domain,
 
 void World::set_contact_params(const ContactParams& law) {
   law_ = law;
+  // A frictionless law neither reads nor writes the springs' history (the pair loop
+  // skips it): clear it here so that none is left to reappear when friction returns.
+  if (law_.ks <= 0.0) {
+    std::fill(nl_.fs.begin(), nl_.fs.end(), Vec3::Zero());
+    std::fill(nl_.mr.begin(), nl_.mr.end(), Vec3::Zero());
+    std::fill(wall_fs_.begin(), wall_fs_.end(), Vec3::Zero());
+    std::fill(wall_mr_.begin(), wall_mr_.end(), Vec3::Zero());
+  }
   if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
   forces_valid_ = false;
 }
@@ -123,7 +131,9 @@ struct VerletArrays {
 };
 
 // Scatters a finished batch: forces and torques onto the grains, history back into
-// the list, the largest overlap into the thread's accumulator.
+// the list, the largest overlap into the thread's accumulator. A frictionless batch
+// has forces along the normal only: no torques, no history.
+template <bool Friction>
 void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, ThreadAcc& acc) {
   // Lanes come row by row: sum each row's force and torque on i in registers and
   // store once, instead of a load-add-store chain through the same address.
@@ -133,7 +143,7 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
     const int i = b.i[l], j = b.j[l], e = b.e[l];
     if (i != row) {
       F[row] += fi;
-      T[row] += ti;
+      if constexpr (Friction) T[row] += ti;
       fi.setZero();
       ti.setZero();
       row = i;
@@ -141,10 +151,12 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
     const Vec3 f(b.fx[l], b.fy[l], b.fz[l]);
     fi += f;
     F[j] -= f;
-    ti += Vec3(b.tix[l], b.tiy[l], b.tiz[l]);
-    T[j] += Vec3(b.tjx[l], b.tjy[l], b.tjz[l]);
-    FS[e] = Vec3(b.fsx[l], b.fsy[l], b.fsz[l]);
-    MR[e] = Vec3(b.mrx[l], b.mry[l], b.mrz[l]);
+    if constexpr (Friction) {
+      ti += Vec3(b.tix[l], b.tiy[l], b.tiz[l]);
+      T[j] += Vec3(b.tjx[l], b.tjy[l], b.tjz[l]);
+      FS[e] = Vec3(b.fsx[l], b.fsy[l], b.fsz[l]);
+      MR[e] = Vec3(b.mrx[l], b.mry[l], b.mrz[l]);
+    }
     const double rmin = std::min(b.ri[l], b.rj[l]);
     if (b.delta[l] > acc.max_overlap * rmin) {  // divide only for a new maximum
       acc.max_overlap = b.delta[l] / rmin;
@@ -153,7 +165,7 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
   }
   if (b.count > 0) {
     F[row] += fi;
-    T[row] += ti;
+    if constexpr (Friction) T[row] += ti;
   }
 }
 
@@ -161,7 +173,9 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
 
 // Pair contacts of rows [begin, end): touching pairs are packed lane by lane into a
 // batch, the law runs over the batch (contact_batch.hpp), results are scattered.
-template <bool Periodic>
+// Frictionless (dense preparation's first stage, the collision test): the law needs
+// no velocities, spins or history, and nothing of them is packed or scattered.
+template <bool Periodic, bool Friction>
 void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   const double dt = opt_.dt;
   const ContactParams law = law_;
@@ -177,17 +191,33 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   int lanes = 0;  // a local, not b.count: the packing loop keeps it in a register
   auto flush = [&] {
     b.count = lanes;
-    pair_batch_law(law, dt, b);
-    scatter_batch(b, F, T, FS, MR, acc);
+    if constexpr (Friction)
+      pair_batch_law(law, dt, b);
+    else
+      pair_batch_law<false, false, false>(law, dt, b);
+    scatter_batch<Friction>(b, F, T, FS, MR, acc);
     lanes = 0;
   };
 
+  // Plain doubles, not Vec3: Eigen packs a 3-vector as 2 + 1 lanes, and moving its
+  // components into the batch's scalar arrays cost a shuffle each.
+  const double* x = X->data();
+  const double* v = V->data();
+  const double* w = W->data();
+  double* fs = FS->data();
+  double* mr = MR->data();
+  const int* S = nl_.start.data();
   for (int i = begin; i < end; ++i) {
-    const Vec3 xi = X[i], vi = V[i], wi = W[i];
+    const double xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
+    const double vi0 = v[3 * i], vi1 = v[3 * i + 1], vi2 = v[3 * i + 2];
+    const double wi0 = w[3 * i], wi1 = w[3 * i + 1], wi2 = w[3 * i + 2];
     const double ri = R[i];
-    for (int e = nl_.start[i]; e < nl_.start[i + 1]; ++e) {
+    // The bounds in locals: the byte store to TOUCH may alias anything, and would
+    // make the compiler reload them for every candidate.
+    const int e_end = S[i + 1];
+    for (int e = S[i]; e < e_end; ++e) {
       const int j = J[e];
-      Vec3 d = X[j] - xi;
+      Vec3 d(x[3 * j] - xi0, x[3 * j + 1] - xi1, x[3 * j + 2] - xi2);
       if constexpr (Periodic) dom_.min_image(d);
       const double dist2 = d.squaredNorm();
       const double rj = R[j];
@@ -211,23 +241,23 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       b.d2[l] = dist2;
       b.ri[l] = ri;
       b.rj[l] = rj;
-      const Vec3 vr = vi - V[j];
-      b.vx[l] = vr.x();
-      b.vy[l] = vr.y();
-      b.vz[l] = vr.z();
-      b.wix[l] = wi.x();
-      b.wiy[l] = wi.y();
-      b.wiz[l] = wi.z();
-      const Vec3& wj = W[j];
-      b.wjx[l] = wj.x();
-      b.wjy[l] = wj.y();
-      b.wjz[l] = wj.z();
-      b.fsx[l] = FS[e].x();
-      b.fsy[l] = FS[e].y();
-      b.fsz[l] = FS[e].z();
-      b.mrx[l] = MR[e].x();
-      b.mry[l] = MR[e].y();
-      b.mrz[l] = MR[e].z();
+      if constexpr (Friction) {
+        b.vx[l] = vi0 - v[3 * j];
+        b.vy[l] = vi1 - v[3 * j + 1];
+        b.vz[l] = vi2 - v[3 * j + 2];
+        b.wix[l] = wi0;
+        b.wiy[l] = wi1;
+        b.wiz[l] = wi2;
+        b.wjx[l] = w[3 * j];
+        b.wjy[l] = w[3 * j + 1];
+        b.wjz[l] = w[3 * j + 2];
+        b.fsx[l] = fs[3 * e];
+        b.fsy[l] = fs[3 * e + 1];
+        b.fsz[l] = fs[3 * e + 2];
+        b.mrx[l] = mr[3 * e];
+        b.mry[l] = mr[3 * e + 1];
+        b.mrz[l] = mr[3 * e + 2];
+      }
       if (lanes == kPairBatch) flush();
     }
   }
@@ -376,6 +406,7 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   acc_.assign(nt, ThreadAcc{});
   wall_part_.assign(static_cast<std::size_t>(nt) * nw, WallPartial{});
   const bool periodic = dom_.any_periodic();
+  const bool frictional = law_.ks > 0.0;
   double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
 
 #pragma omp parallel num_threads(nt)
@@ -392,9 +423,9 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
     for (int b = 0; b < n; b += chunk) {
       const int e = std::min(n, b + chunk);
       if (periodic)
-        force_range<true>(b, e, F, T, acc_[tid]);
+        frictional ? force_range<true, true>(b, e, F, T, acc_[tid]) : force_range<true, false>(b, e, F, T, acc_[tid]);
       else
-        force_range<false>(b, e, F, T, acc_[tid]);
+        frictional ? force_range<false, true>(b, e, F, T, acc_[tid]) : force_range<false, false>(b, e, F, T, acc_[tid]);
     }
 #pragma omp barrier
     const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);

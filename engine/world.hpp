@@ -123,7 +123,7 @@ class World {
   void half_kick(int begin, int end, ThreadAcc& acc);
   template <bool Periodic>
   bool drift(bool listed);
-  template <bool Periodic>
+  template <bool Periodic, bool Friction>
   void force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc);
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);

@@ -147,6 +147,45 @@ TEST(NeighbourSearch, ContactHistorySurvivesRebuilds) {
   EXPECT_LT(worst, 1e-12);
 }
 
+TEST(StageSwitch, FrictionlessStageLeavesNoHistoryToReappear) {
+  // Dense preparation: frictional springs, then a frictionless stage (which skips
+  // spins and history in the pair loop), then friction again. The frictionless stage
+  // must exert no torque, and the last stage must start from fresh springs: it runs
+  // exactly as a world built from the same grains with no history at all.
+  Vec3 hi;
+  Particles p = cloud(300, 0.35, 11, 0.5, &hi);
+  for (std::size_t i = 0; i < p.size(); ++i) p.r[i] *= 1.06;  // a crowded box: many contacts from the start
+  Domain dom;
+  dom.hi = hi;
+  const ContactParams frictional = law(3e7, 2.7e7, 30.0, 1.0, 0.2);
+  World w(p, box_walls(Vec3::Zero(), hi), dom, frictional, options(safe_dt()));
+  w.run(2000);
+  double spring = 0.0;
+  w.for_each_contact([&](const ContactView& c) { spring += c.fs.norm() + c.mr.norm(); });
+  ASSERT_GT(spring, 0.0) << "the first stage must leave history to clear";
+
+  w.set_contact_params(law(3e7, 0.0));
+  const std::vector<Vec3> spins = w.particles().w;
+  w.run(10);  // short: most contacts of the first stage are still closed
+  long contacts = 0;
+  w.for_each_contact([&](const ContactView& c) {
+    ++contacts;
+    EXPECT_EQ(c.fs, Vec3::Zero());
+    EXPECT_EQ(c.mr, Vec3::Zero());
+  });
+  ASSERT_GT(contacts, 20);
+  EXPECT_EQ(w.particles().w, spins) << "a frictionless contact exerts no torque";
+
+  World fresh(w.particles(), w.walls(), dom, frictional, options(safe_dt()));
+  w.set_contact_params(frictional);
+  w.run(1000);
+  fresh.run(1000);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    worst = std::max(worst, (w.particles().x[i] - fresh.particles().x[i]).norm());
+  EXPECT_LT(worst, 1e-15);
+}
+
 TEST(Determinism, SameSeedAndThreadsGiveIdenticalRuns) {
   CollisionConfig c;
   c.particles = 200;
