@@ -204,7 +204,7 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel " << quoted(rs.label) << " noenhanced\n"
     << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
     << "]\nset view map\nset datafile missing 'NaN'\nset palette rgbformulae 33,13,10\n"
-    << "set bmargin at screen 0.17\nset key at screen 0.5,0.07 center horizontal maxrows 2\n"
+    << "set bmargin at screen 0.21\nset key at screen 0.5,0.1 center horizontal maxrows 3\n"
     << "set style textbox opaque noborder\n";
   if (zhi > zlo) g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";
   int label = 1;

@@ -19,7 +19,7 @@ TEST(Cli, HelpOnEverySubcommand) {
 
 TEST(Cli, ValidatePrintsCountAndFirstTask) {
   TempDir d;
-  const Result r = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"}, d.path.string());
+  const Result r = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/collision.json"}, d.path.string());
   EXPECT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("4 task(s)"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("\"dt_factor\": 0.05"), std::string::npos) << r.out;

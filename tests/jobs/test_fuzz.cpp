@@ -76,7 +76,7 @@ std::string mutate_json(json j, std::mt19937& rng) {
 
 TEST(Fuzz, MutatedExamplesValidateOrFailCleanly) {
   std::vector<std::string> sources;
-  for (const char* name : {"quickstart.json", "collision-timestep.json"})
+  for (const char* name : {"quickstart.json", "collision.json", "collision-timestep.json"})
     sources.push_back(slurp(std::string(DEMCAL_EXAMPLES_DIR) + "/" + name));
   std::mt19937 rng(12345);
   int ok = 0, rejected = 0;

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <set>
 
 using demcal::jobs::Job;
@@ -102,9 +103,24 @@ TEST(Grid, DegreesBecomeRadiansOnlyInside) {
   EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 30.0);
 }
 
-TEST(Grid, ExamplesWithRegisteredScenesValidate) {
-  for (const char* name : {"quickstart.json", "collision-timestep.json"}) {
-    const Job job = demcal::jobs::load_job_file(std::string(DEMCAL_EXAMPLES_DIR) + "/" + name);
-    EXPECT_GT(job.tasks.size(), 1u) << name;
+TEST(Grid, EveryExampleValidates) {
+  int files = 0;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(DEMCAL_EXAMPLES_DIR)) {
+    if (entry.path().extension() != ".json") continue;
+    ++files;
+    const Job job = demcal::jobs::load_job_file(entry.path().string());
+    EXPECT_GT(job.tasks.size(), 0u) << entry.path();
   }
+  EXPECT_GE(files, 10);
+  // The quickstart is a calibration: a (theta, eta) grid that map and fit can use.
+  const Job quick = demcal::jobs::load_job_file(std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json");
+  EXPECT_EQ(quick.scene, "triaxial");
+  EXPECT_EQ(quick.tasks.size(), 9u);
+  std::set<double> thetas, etas;
+  for (const auto& t : quick.tasks) {
+    thetas.insert(t.params["theta_deg"].get<double>());
+    etas.insert(t.params["eta"].get<double>());
+  }
+  EXPECT_EQ(thetas.size(), 3u);
+  EXPECT_EQ(etas.size(), 3u);
 }
