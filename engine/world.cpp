@@ -409,33 +409,63 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   const bool frictional = law_.ks > 0.0;
   double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
 
+  // Pair rows in one contiguous block per thread, balanced by list entries (plus a
+  // fixed cost per row). Grains are in spatial order and the list is a half list
+  // (j > i), so a block's pairs touch the block and a boundary layer above it: each
+  // thread works on grains its own cache holds, and writes nothing below its block.
+  // (Interleaved chunks balanced as well, but every thread touched every grain, and
+  // the second thread's passes paid for the lines the first had written.)
+  const int* S = nl_.start.data();
+  auto cost = [S](int i) { return static_cast<long long>(S[i]) + 2LL * i; };
+  row_lo_.assign(static_cast<std::size_t>(nt) + 1, n);
+  row_lo_[0] = 0;
+  for (int t = 1; t < nt; ++t) {
+    const long long target = cost(n) * t / nt;
+    int a = row_lo_[t - 1], b = n;  // first row whose cumulative cost reaches the target
+    while (a < b) {
+      const int mid = a + (b - a) / 2;
+      if (cost(mid) < target) a = mid + 1;
+      else b = mid;
+    }
+    row_lo_[t] = a;
+  }
+
 #pragma omp parallel num_threads(nt)
   {
     const int tid = thread_id();
+    // Grains [lo, hi): this thread's part of the reduction, walls, external forces
+    // and kick (the same split as the drift's static schedule).
+    const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);
+    const int hi = static_cast<int>(static_cast<long long>(n) * (tid + 1) / nt);
+    const int rows_lo = row_lo_[tid], rows_hi = row_lo_[tid + 1];
     Vec3* F = tid == 0 ? p_.f.data() : buf_f_[tid].data();
     Vec3* T = tid == 0 ? p_.t.data() : buf_t_[tid].data();
-    std::fill(F, F + n, Vec3::Zero());
-    std::fill(T, T + n, Vec3::Zero());
-    // Rows get shorter with i in a half list; interleaved chunks balance the load.
-    const int chunk = 64;
+    // Thread 0 sums into the grains' own arrays, which every thread clears over its
+    // grain range; the others clear their buffers from their first row up, all that
+    // their rows can write and all that the reduction reads.
+    std::fill(p_.f.begin() + lo, p_.f.begin() + hi, Vec3::Zero());
+    std::fill(p_.t.begin() + lo, p_.t.begin() + hi, Vec3::Zero());
+    if (tid > 0) {
+      std::fill(F + rows_lo, F + n, Vec3::Zero());
+      std::fill(T + rows_lo, T + n, Vec3::Zero());
+    }
+    const int chunk = 64;  // rows per call: the batch flushes at the end of each
 #pragma omp barrier
-#pragma omp for schedule(static, 1) nowait
-    for (int b = 0; b < n; b += chunk) {
-      const int e = std::min(n, b + chunk);
+    for (int b = rows_lo; b < rows_hi; b += chunk) {
+      const int e = std::min(rows_hi, b + chunk);
       if (periodic)
         frictional ? force_range<true, true>(b, e, F, T, acc_[tid]) : force_range<true, false>(b, e, F, T, acc_[tid]);
       else
         frictional ? force_range<false, true>(b, e, F, T, acc_[tid]) : force_range<false, false>(b, e, F, T, acc_[tid]);
     }
 #pragma omp barrier
-    const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);
-    const int hi = static_cast<int>(static_cast<long long>(n) * (tid + 1) / nt);
-    if (nt > 1) {
-      for (int i = lo; i < hi; ++i) {
-        for (int s = 1; s < nt; ++s) {
-          p_.f[i] += buf_f_[s][i];
-          p_.t[i] += buf_t_[s][i];
-        }
+    // Buffers in thread order for each grain: deterministic for a thread count.
+    for (int s = 1; s < nt; ++s) {
+      const Vec3* bf = buf_f_[s].data();
+      const Vec3* bt = buf_t_[s].data();
+      for (int i = std::max(lo, row_lo_[s]); i < hi; ++i) {
+        p_.f[i] += bf[i];
+        p_.t[i] += bt[i];
       }
     }
     if (tid == 0) t_pairs = seconds_since(clock);

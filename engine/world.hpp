@@ -151,6 +151,7 @@ class World {
   // Thread-private force buffers (thread 0 writes the particles' own arrays), the
   // threads' overlap maxima and their sums of each wall's force ([thread * walls + wall]).
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+  std::vector<int> row_lo_;  // first pair row of each thread's block, and n
   std::vector<ThreadAcc> acc_;
   std::vector<WallPartial> wall_part_;
 
