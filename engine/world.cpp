@@ -24,6 +24,9 @@ int thread_id() {
 #endif
 }
 
+// The pair loop and the damping read arrays of Vec3 as flat arrays of doubles.
+static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are read as flat doubles");
+
 double seconds_since(std::chrono::steady_clock::time_point& t) {
   const auto now = std::chrono::steady_clock::now();
   const double s = std::chrono::duration<double>(now - t).count();
@@ -179,9 +182,6 @@ template <bool Periodic, bool Friction>
 void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
   const double dt = opt_.dt;
   const ContactParams law = law_;
-  const Vec3* X = p_.x.data();
-  const Vec3* V = p_.v.data();
-  const Vec3* W = p_.w.data();
   const double* R = p_.r.data();
   const int* J = nl_.j.data();
   Vec3* FS = nl_.fs.data();
@@ -201,9 +201,9 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
 
   // Plain doubles, not Vec3: the components go one by one into the batch's arrays
   // (through Eigen's 2 + 1 lane packing each took a shuffle; 0.5% of the run).
-  const double* x = X->data();
-  const double* v = V->data();
-  const double* w = W->data();
+  const double* x = p_.x.data()->data();
+  const double* v = p_.v.data()->data();
+  const double* w = p_.w.data()->data();
   double* fs = FS->data();
   double* mr = MR->data();
   const int* S = nl_.start.data();
@@ -360,7 +360,6 @@ void World::external_forces(int begin, int end) {
   // The loop runs over the components as one flat array so that it vectorises; it
   // damps fixed grains' forces too, which moves nothing (1/m = 0) and is read by
   // nothing (the unbalanced-force ratio skips fixed grains).
-  static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are read as flat doubles");
   double* __restrict fc = f[0].data();
   double* __restrict tc = t[0].data();
   const double* __restrict vc = v[0].data();
@@ -391,8 +390,8 @@ void World::half_kick(int begin, int end, ThreadAcc& acc) {
   acc.finite = std::isfinite(sum);
 }
 
-// One parallel region per force evaluation: pair contacts over interleaved row
-// chunks into thread-private buffers; then each thread owns a contiguous grain range
+// One parallel region per force evaluation: pair contacts over one block of rows per
+// thread into thread-private buffers; then each thread owns a contiguous grain range
 // for the reduction of those buffers, the grain-wall contacts, the external forces
 // and (with `kick`) the second half-kick, which need no barrier between them.
 bool World::evaluate_forces(bool rebuild, bool kick) {
