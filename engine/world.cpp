@@ -62,12 +62,8 @@ World::World(Particles particles, std::vector<Wall> walls, const Domain& domain,
   wall_mr_.assign(nw, Vec3::Zero());
   wall_touch_.assign(nw, 0);
   if (!opt_.allow_unstable_dt) check_timestep(opt_.dt, stability_limits(*this));
-  buf_f_.resize(opt_.threads);
+  buf_f_.resize(opt_.threads);  // sized when the first blocks are cut
   buf_t_.resize(opt_.threads);
-  for (int t = 1; t < opt_.threads; ++t) {
-    buf_f_[t].assign(p_.size(), Vec3::Zero());
-    buf_t_[t].assign(p_.size(), Vec3::Zero());
-  }
 }
 
 void World::set_contact_params(const ContactParams& law) {
@@ -137,7 +133,9 @@ struct VerletArrays {
 // the list, the largest overlap into the thread's accumulator. A frictionless batch
 // has forces along the normal only: no torques, no history.
 template <bool Friction>
-void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, ThreadAcc& acc) {
+void scatter_batch(const PairBatch& b, const ForceSink& out, Vec3* FS, Vec3* MR, ThreadAcc& acc) {
+  Vec3* F = out.f;
+  Vec3* T = out.t;
   // Lanes come row by row: sum each row's force and torque on i in registers and
   // store once, instead of a load-add-store chain through the same address.
   int row = b.count > 0 ? b.i[0] : 0;
@@ -153,10 +151,12 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
     }
     const Vec3 f(b.fx[l], b.fy[l], b.fz[l]);
     fi += f;
-    F[j] -= f;
+    // Grains above the block go to the thread's buffer: a select, not a branch.
+    const bool mine = j < out.bound;
+    (mine ? F : out.buf_f)[j] -= f;
     if constexpr (Friction) {
       ti += Vec3(b.tix[l], b.tiy[l], b.tiz[l]);
-      T[j] += Vec3(b.tjx[l], b.tjy[l], b.tjz[l]);
+      (mine ? T : out.buf_t)[j] += Vec3(b.tjx[l], b.tjy[l], b.tjz[l]);
       FS[e] = Vec3(b.fsx[l], b.fsy[l], b.fsz[l]);
       MR[e] = Vec3(b.mrx[l], b.mry[l], b.mrz[l]);
     }
@@ -179,7 +179,7 @@ void scatter_batch(const PairBatch& b, Vec3* F, Vec3* T, Vec3* FS, Vec3* MR, Thr
 // Frictionless (dense preparation's first stage, the collision test): the law needs
 // no velocities, spins or history, and nothing of them is packed or scattered.
 template <bool Periodic, bool Friction>
-void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
+void World::force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc) {
   const double dt = opt_.dt;
   const ContactParams law = law_;
   const double* R = p_.r.data();
@@ -195,7 +195,7 @@ void World::force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc) {
       pair_batch_law(law, dt, b);
     else
       pair_batch_law<false, false, false>(law, dt, b);
-    scatter_batch<Friction>(b, F, T, FS, MR, acc);
+    scatter_batch<Friction>(b, out, FS, MR, acc);
     lanes = 0;
   };
 
@@ -390,31 +390,18 @@ void World::half_kick(int begin, int end, ThreadAcc& acc) {
   acc.finite = std::isfinite(sum);
 }
 
-// One parallel region per force evaluation: pair contacts over one block of rows per
-// thread into thread-private buffers; then each thread owns a contiguous grain range
-// for the reduction of those buffers, the grain-wall contacts, the external forces
-// and (with `kick`) the second half-kick, which need no barrier between them.
-bool World::evaluate_forces(bool rebuild, bool kick) {
-  auto clock = std::chrono::steady_clock::now();
-  if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
-  update_wall_candidates();
-  times_.neighbor += seconds_since(clock);
+// Cuts the pair rows into one contiguous block per thread, balanced by list entries
+// (plus a fixed cost per row), and finds how far above its block each block's
+// pairs reach. Grains are in spatial order and the list is a half list (j > i), so
+// a block's pairs touch the block and a boundary layer above it: each thread works
+// on grains its own cache holds. (Interleaved chunks balanced as well, but every
+// thread touched every grain, and the second thread's passes paid for the lines the
+// first had written.) The list's row starts change only when it is rebuilt.
+void World::assign_blocks() {
   const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
-  const std::size_t nw = walls_.size();
-  acc_.assign(nt, ThreadAcc{});
-  wall_part_.assign(static_cast<std::size_t>(nt) * nw, WallPartial{});
-  const bool periodic = dom_.any_periodic();
-  const bool frictional = law_.ks > 0.0;
-  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
-
-  // Pair rows in one contiguous block per thread, balanced by list entries (plus a
-  // fixed cost per row). Grains are in spatial order and the list is a half list
-  // (j > i), so a block's pairs touch the block and a boundary layer above it: each
-  // thread works on grains its own cache holds, and writes nothing below its block.
-  // (Interleaved chunks balanced as well, but every thread touched every grain, and
-  // the second thread's passes paid for the lines the first had written.)
   const int* S = nl_.start.data();
+  const int* J = nl_.j.data();
   auto cost = [S](int i) { return static_cast<long long>(S[i]) + 2LL * i; };
   row_lo_.assign(static_cast<std::size_t>(nt) + 1, n);
   row_lo_[0] = 0;
@@ -428,41 +415,80 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
     }
     row_lo_[t] = a;
   }
+  reach_.assign(static_cast<std::size_t>(nt), 0);
+  for (int t = 0; t < nt; ++t) {
+    int top = row_lo_[t + 1];
+    for (int e = S[row_lo_[t]]; e < S[row_lo_[t + 1]]; ++e) top = std::max(top, J[e] + 1);
+    reach_[t] = top;
+  }
+  if (nt > 1)
+    for (int t = 0; t < nt; ++t) {
+      buf_f_[t].resize(p_.size(), Vec3::Zero());
+      buf_t_[t].resize(p_.size(), Vec3::Zero());
+    }
+  blocks_builds_ = nl_.builds();
+}
+
+// First grain of a thread's block: the blocks of the last force evaluation, or an
+// even split before there are any.
+int World::block_lo(int tid) const {
+  const int n = static_cast<int>(p_.size());
+  const int nt = opt_.threads;
+  if (row_lo_.size() == static_cast<std::size_t>(nt) + 1 && row_lo_[nt] == n) return row_lo_[tid];
+  return static_cast<int>(static_cast<long long>(n) * tid / nt);
+}
+
+// One parallel region per force evaluation. Each thread owns one block of grains:
+// it clears their forces, runs their pair rows (forces on grains above the block go
+// to its buffer), adds the buffered forces the blocks below put on its grains, then
+// does its grains' wall contacts, external forces and (with `kick`) second
+// half-kick, which need no barrier between them.
+bool World::evaluate_forces(bool rebuild, bool kick) {
+  auto clock = std::chrono::steady_clock::now();
+  if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
+  update_wall_candidates();
+  const int n = static_cast<int>(p_.size());
+  const int nt = opt_.threads;
+  if (nl_.builds() != blocks_builds_ || row_lo_.size() != static_cast<std::size_t>(nt) + 1 || row_lo_[nt] != n)
+    assign_blocks();
+  times_.neighbor += seconds_since(clock);
+  const std::size_t nw = walls_.size();
+  acc_.assign(nt, ThreadAcc{});
+  wall_part_.assign(static_cast<std::size_t>(nt) * nw, WallPartial{});
+  const bool periodic = dom_.any_periodic();
+  const bool frictional = law_.ks > 0.0;
+  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
 
 #pragma omp parallel num_threads(nt)
   {
     const int tid = thread_id();
-    // Grains [lo, hi): this thread's part of the reduction, walls, external forces
-    // and kick (the same split as the drift's static schedule).
-    const int lo = static_cast<int>(static_cast<long long>(n) * tid / nt);
-    const int hi = static_cast<int>(static_cast<long long>(n) * (tid + 1) / nt);
-    const int rows_lo = row_lo_[tid], rows_hi = row_lo_[tid + 1];
-    Vec3* F = tid == 0 ? p_.f.data() : buf_f_[tid].data();
-    Vec3* T = tid == 0 ? p_.t.data() : buf_t_[tid].data();
-    // Thread 0 sums into the grains' own arrays, which every thread clears over its
-    // grain range; the others clear their buffers from their first row up, all that
-    // their rows can write and all that the reduction reads.
+    const int lo = row_lo_[tid], hi = row_lo_[tid + 1], reach = std::max(hi, reach_[tid]);
+    ForceSink out{p_.f.data(), p_.t.data(), p_.f.data(), p_.t.data(), hi};
+    if (nt > 1) {
+      out.buf_f = buf_f_[tid].data();
+      out.buf_t = buf_t_[tid].data();
+      std::fill(out.buf_f + hi, out.buf_f + reach, Vec3::Zero());
+      std::fill(out.buf_t + hi, out.buf_t + reach, Vec3::Zero());
+    }
     std::fill(p_.f.begin() + lo, p_.f.begin() + hi, Vec3::Zero());
     std::fill(p_.t.begin() + lo, p_.t.begin() + hi, Vec3::Zero());
-    if (tid > 0) {
-      std::fill(F + rows_lo, F + n, Vec3::Zero());
-      std::fill(T + rows_lo, T + n, Vec3::Zero());
-    }
+    // No barrier here: a thread writes only its own block of the grains' arrays and
+    // its own buffer.
     const int chunk = 64;  // rows per call: the batch flushes at the end of each
-#pragma omp barrier
-    for (int b = rows_lo; b < rows_hi; b += chunk) {
-      const int e = std::min(rows_hi, b + chunk);
+    for (int b = lo; b < hi; b += chunk) {
+      const int e = std::min(hi, b + chunk);
       if (periodic)
-        frictional ? force_range<true, true>(b, e, F, T, acc_[tid]) : force_range<true, false>(b, e, F, T, acc_[tid]);
+        frictional ? force_range<true, true>(b, e, out, acc_[tid]) : force_range<true, false>(b, e, out, acc_[tid]);
       else
-        frictional ? force_range<false, true>(b, e, F, T, acc_[tid]) : force_range<false, false>(b, e, F, T, acc_[tid]);
+        frictional ? force_range<false, true>(b, e, out, acc_[tid]) : force_range<false, false>(b, e, out, acc_[tid]);
     }
 #pragma omp barrier
-    // Buffers in thread order for each grain: deterministic for a thread count.
-    for (int s = 1; s < nt; ++s) {
+    // The lower blocks' buffers in thread order: deterministic for a thread count.
+    for (int s = 0; s < tid; ++s) {
       const Vec3* bf = buf_f_[s].data();
       const Vec3* bt = buf_t_[s].data();
-      for (int i = std::max(lo, row_lo_[s]); i < hi; ++i) {
+      const int top = std::min(hi, reach_[s]);
+      for (int i = std::max(lo, row_lo_[s + 1]); i < top; ++i) {
         p_.f[i] += bf[i];
         p_.t[i] += bt[i];
       }
@@ -508,7 +534,6 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
 // common case, tests no axis per grain.
 template <bool Periodic>
 bool World::drift(bool listed) {
-  const int n = static_cast<int>(p_.size());
   const double dt = opt_.dt, half = 0.5 * dt, skin = skin_;
   const Domain dom = dom_;
   const VerletArrays a(p_);
@@ -516,8 +541,9 @@ bool World::drift(bool listed) {
   const Vec3* xb = nl_.build_positions();
   const double* rb = nl_.build_radii();
   bool stale = false;
-#pragma omp parallel for schedule(static) num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
-  for (int i = 0; i < n; ++i) {
+  // Each thread drifts the block whose forces it evaluated: the lines are in its cache.
+#pragma omp parallel num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
+  for (int i = block_lo(thread_id()), end = block_lo(thread_id() + 1); i < end; ++i) {
     a.kick(i, half);
     a.x[i] += dt * a.v[i];
     if constexpr (Periodic) dom.wrap(a.x[i]);

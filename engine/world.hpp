@@ -30,6 +30,16 @@ struct alignas(64) ThreadAcc {
   bool finite = true;        // the thread's grains ended the step with finite x, v, w
 };
 // One thread's sum over its grains of the force on them from one wall.
+// Where a thread's pair loop puts forces and torques: grains below `bound` (its own
+// block) in the grains' arrays, grains at or above it in the thread's buffers.
+struct ForceSink {
+  Vec3* f;
+  Vec3* t;
+  Vec3* buf_f;
+  Vec3* buf_t;
+  int bound;
+};
+
 struct alignas(64) WallPartial {
   Vec3 force = Vec3::Zero();
   int contacts = 0;
@@ -124,7 +134,9 @@ class World {
   template <bool Periodic>
   bool drift(bool listed);
   template <bool Periodic, bool Friction>
-  void force_range(int begin, int end, Vec3* F, Vec3* T, ThreadAcc& acc);
+  void force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc);
+  void assign_blocks();
+  int block_lo(int tid) const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
   void external_forces(int begin, int end);
@@ -148,10 +160,13 @@ class World {
   std::vector<Vec3> wall_point_build_;
   long wall_list_builds_ = -1;
 
-  // Thread-private force buffers (thread 0 writes the particles' own arrays), the
-  // threads' overlap maxima and their sums of each wall's force ([thread * walls + wall]).
+  // Thread-private buffers for the forces a block's pairs put on grains above the
+  // block, the threads' overlap maxima and their sums of each wall's force
+  // ([thread * walls + wall]).
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
   std::vector<int> row_lo_;  // first pair row of each thread's block, and n
+  std::vector<int> reach_;   // one past the highest grain each block's list entries name
+  long blocks_builds_ = -1;  // the list build the blocks were cut for
   std::vector<ThreadAcc> acc_;
   std::vector<WallPartial> wall_part_;
 
