@@ -244,9 +244,10 @@ std::string fmt(double v, int prec = 4) {
 
 // Servo all six walls to p0 until equilibrium (two consecutive passing checks).
 // With ramp_steps > 0 the target goes geometrically from the present target to
-// target_p over that many steps first.
+// target_p over that many steps first. With check_ufr false only the walls' stresses
+// are judged (see the unloading stage).
 StageReport servo_to_equilibrium(Rig& rig, const std::string& name, double target_p, const ServoGains& g,
-                                 double prog0, double prog1, long ramp_steps = 0) {
+                                 double prog0, double prog1, long ramp_steps = 0, bool check_ufr = true) {
   const TriaxialConfig& cfg = rig.cfg;
   World& w = rig.world;
   rig.stage = name;
@@ -268,7 +269,7 @@ StageReport servo_to_equilibrium(Rig& rig, const std::string& name, double targe
     if ((w.step_count() - s0) % cfg.check_interval != 0 || w.step_count() - s0 <= ramp_steps) continue;
     err = rig.stress_error(0, 5);
     ufr = unbalanced_force_ratio(w);
-    passes = (err < cfg.stress_tolerance && ufr < cfg.ufr_tolerance) ? passes + 1 : 0;
+    passes = (err < cfg.stress_tolerance && (!check_ufr || ufr < cfg.ufr_tolerance)) ? passes + 1 : 0;
     if (rig.obs)
       rig.obs->on_progress(prog0 + (prog1 - prog0) * static_cast<double>(w.step_count() - s0) /
                                        static_cast<double>(cfg.prep_step_budget));
@@ -387,7 +388,12 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       res.stages.push_back(servo_to_equilibrium(rig, "isotropic_compression", pf * p0, prep_gains, 0.0, 0.1));
       rig.target_p = pf * p0;
       if (pf != 1.0)
-        res.stages.push_back(servo_to_equilibrium(rig, "unloading", p0, prep_gains, 0.1, 0.15, cfg.unloading_steps));
+        // The walls' stresses only: a frictionless packing held by servo walls at p0
+        // keeps creeping (UFR 0.01-0.045 for 160,000 steps in one 2,000-grain run, a
+        // round-off decides whether it dips below 0.01 early), while friction,
+        // switched on next, arrests it within the stabilise stage, which judges UFR.
+        res.stages.push_back(
+            servo_to_equilibrium(rig, "unloading", p0, prep_gains, 0.1, 0.15, cfg.unloading_steps, false));
       world.set_contact_params(target);
       res.stages.push_back(stabilise(rig, "stabilise"));
       res.stages.push_back(servo_to_equilibrium(rig, "recompression", cfg.confining_pressure, prep_gains, 0.15, 0.3));

@@ -11,7 +11,9 @@
 //         on, run until the unbalanced force ratio is small; "recompression":
 //         servo compression to p0 and equilibrium again (the seed's three steps).
 // Equilibrium = every wall's stress error below stress_tolerance and the
-// unbalanced-force ratio below ufr_tolerance, on two consecutive checks. A stage
+// unbalanced-force ratio below ufr_tolerance, on two consecutive checks (the
+// frictionless "unloading" judges the walls only: the stabilise stage after it
+// judges the ratio once friction is on). A stage
 // that does not get there within its step budget ends the run: not_converged with
 // the stage named, never a result.
 //
