@@ -306,6 +306,10 @@ void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
     const std::vector<int>& near = wall_near_[w];
     const auto first = std::lower_bound(near.begin(), near.end(), begin);
     const auto last = std::lower_bound(first, near.end(), end);
+    if (!(wall.frictional && frictional)) {
+      smooth_wall_forces(w, &*first, &*first + (last - first), acc, sum);
+      continue;
+    }
     for (auto it = first; it != last; ++it) {
       const int i = *it;
       const std::size_t slot = w * np + static_cast<std::size_t>(i);
@@ -339,6 +343,62 @@ void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
       }
     }
   }
+}
+
+// Contacts with a smooth wall (the triaxial box's, and any wall while the law is
+// frictionless): the normal spring alone, no torque. The same force, bit for bit,
+// as the general law gives with the springs off, without its tangential and rolling
+// kinematics (a smooth box had 11% of a 500-grain triaxial run in the general path).
+void World::smooth_wall_forces(std::size_t w, const int* first, const int* last, ThreadAcc& acc,
+                               WallPartial& sum) {
+  // Everything the loop reads in locals: its stores through Vec3 pointers could
+  // alias the wall and the arrays' bounds, which the compiler would reload per grain.
+  const Wall& wall = walls_[w];
+  const Vec3 normal = wall.normal, point = wall.point;
+  const bool active = wall.active;
+  const double kn = law_.kn;
+  const std::size_t base = w * p_.size();
+  const double* __restrict r = p_.r.data();
+  const Vec3* __restrict x = p_.x.data();
+  Vec3* __restrict f = p_.f.data();
+  Vec3* __restrict fs = wall_fs_.data() + base;
+  Vec3* __restrict mr = wall_mr_.data() + base;
+  std::uint8_t* __restrict touch = wall_touch_.data() + base;
+  Vec3 total = Vec3::Zero();
+  int contacts = 0;
+  double max_overlap = acc.max_overlap;
+  int max_i = acc.max_overlap_i;
+  for (const int* it = first; it != last; ++it) {
+    const int i = *it;
+    const double ri = r[i];
+    const double h = active ? (x[i] - point).dot(normal) : ri;
+    // The springs are kept at zero as the general law keeps them, in case this wall
+    // or the law had friction before.
+    if (h >= ri) {
+      if (touch[i]) {
+        fs[i].setZero();
+        mr[i].setZero();
+        touch[i] = 0;
+      }
+      continue;
+    }
+    fs[i].setZero();
+    mr[i].setZero();
+    touch[i] = 1;
+    const double delta = ri - h;
+    const Vec3 force = (kn * delta) * normal;
+    f[i] += force;
+    total += force;
+    ++contacts;
+    if (delta > max_overlap * ri) {
+      max_overlap = delta / ri;
+      max_i = i;
+    }
+  }
+  sum.force += total;
+  sum.contacts += contacts;
+  acc.max_overlap = max_overlap;
+  acc.max_overlap_i = max_i;
 }
 
 // Gravity and (preparation only) local damping on the total force of grains [begin, end).

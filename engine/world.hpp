@@ -139,6 +139,7 @@ class World {
   int block_lo(int tid) const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
+  void smooth_wall_forces(std::size_t w, const int* first, const int* last, ThreadAcc& acc, WallPartial& sum);
   void external_forces(int begin, int end);
   void check_finite_and_overlap();
   void check_energy();
