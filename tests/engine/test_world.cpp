@@ -193,6 +193,40 @@ TEST(StageSwitch, FrictionlessStageLeavesNoHistoryToReappear) {
   EXPECT_LT(worst, 1e-15);
 }
 
+TEST(StageSwitch, WallTurnedSmoothDropsItsSpringsAndPushesAlongItsNormal) {
+  // Smooth walls have a contact loop of their own (normal spring only). A wall that
+  // had friction and rolling resistance keeps no spring once it turns smooth, even
+  // for contacts that stay closed across the switch, and pushes along its normal
+  // with kn * overlap.
+  Vec3 hi;
+  Particles p = crowded_box(&hi);
+  Domain dom;
+  dom.hi = hi;
+  std::vector<Wall> walls = box_walls(Vec3::Zero(), hi);
+  for (auto& wall : walls) wall.frictional = wall.rolling = true;
+  const double kn = 3e7;
+  World w(p, walls, dom, law(kn, 2.7e7, 30.0, 1.0, 0.2), options(safe_dt()));
+  w.run(2000);
+  double spring = 0.0;
+  w.for_each_contact([&](const ContactView& c) {
+    if (c.wall >= 0) spring += c.fs.norm() + c.mr.norm();
+  });
+  ASSERT_GT(spring, 0.0) << "the walls must hold springs before they turn smooth";
+
+  for (auto& wall : w.walls()) wall.frictional = wall.rolling = false;
+  w.run(1);  // one step: nearly every wall contact is still the one it was
+  long wall_contacts = 0;
+  w.for_each_contact([&](const ContactView& c) {
+    if (c.wall < 0) return;
+    ++wall_contacts;
+    EXPECT_EQ(c.fs, Vec3::Zero());
+    EXPECT_EQ(c.mr, Vec3::Zero());
+    const Vec3 expected = (kn * c.delta) * w.walls()[static_cast<std::size_t>(c.wall)].normal;
+    EXPECT_LT((c.force - expected).norm(), 1e-12 * expected.norm());
+  });
+  EXPECT_GE(wall_contacts, 3);
+}
+
 TEST(Determinism, SameSeedAndThreadsGiveIdenticalRuns) {
   CollisionConfig c;
   c.particles = 200;
