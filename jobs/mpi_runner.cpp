@@ -70,6 +70,13 @@ void test_kill_rank_hook(std::size_t index) {
   if (env && *env && std::to_string(index) == env) raise(SIGKILL);
 }
 
+// Test hook: rank 0 stalls this long after handing out each task, as a database
+// write on a loaded disk can.
+void test_root_stall_hook() {
+  const char* env = std::getenv("DEMCAL_TEST_ROOT_STALL_S");
+  if (env && *env) std::this_thread::sleep_for(std::chrono::duration<double>(std::atof(env)));
+}
+
 std::string format_s(double s) {
   std::ostringstream o;
   o << s;
@@ -281,8 +288,27 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         k.ready = true;
       }
     }
+    // Lost ranks: silent beyond the timeout while holding a task, or never started.
+    // Judged right after the drain, so that a heartbeat which arrived while rank 0
+    // was busy is read first.
+    const auto now = Clock::now();
+    for (int r = 1; r < size; ++r) {
+      Rank& k = ranks[static_cast<std::size_t>(r)];
+      if (k.lost || k.stopped) continue;
+      const double silent = seconds(now - k.last_seen);
+      if (k.task && silent > mpi.timeout_s) {
+        k.lost = true;
+        log << "worker rank " << r << " lost: no message for " << format_s(mpi.timeout_s) << " s\n";
+        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + format_s(mpi.timeout_s) +
+                         " s); rerun with --retry-failed");
+      } else if (!k.started && silent > std::max(600.0, 10 * mpi.timeout_s)) {
+        k.lost = true;
+        log << "worker rank " << r << " never reported; not used\n";
+      }
+    }
     // Hand out work; with none left, idle ranks leave at once (a lost rank's task is
     // failed, not re-queued, so no work appears later).
+    const auto deaf_from = Clock::now();
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (!k.ready || k.lost || k.stopped) continue;
@@ -305,25 +331,15 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         progress.line(describe_task(job, static_cast<std::size_t>(k.task->index)) + " started on rank " +
                           std::to_string(r) + " (task id " + std::to_string(k.task->id) + ")",
                       live);
+        test_root_stall_hook();
       }
       if (!k.task && queue.empty()) stop_rank(r);
     }
-    // Lost ranks: silent beyond the timeout while holding a task, or never started.
-    const auto now = Clock::now();
-    for (int r = 1; r < size; ++r) {
-      Rank& k = ranks[static_cast<std::size_t>(r)];
-      if (k.lost || k.stopped) continue;
-      const double silent = seconds(now - k.last_seen);
-      if (k.task && silent > mpi.timeout_s) {
-        k.lost = true;
-        log << "worker rank " << r << " lost: no message for " << format_s(mpi.timeout_s) << " s\n";
-        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + format_s(mpi.timeout_s) +
-                         " s); rerun with --retry-failed");
-      } else if (!k.started && silent > std::max(600.0, 10 * mpi.timeout_s)) {
-        k.lost = true;
-        log << "worker rank " << r << " never reported; not used\n";
-      }
-    }
+    // Rank 0 read no messages while it handed out work (database writes a loaded
+    // disk can stall for seconds, and a result larger than MPI's eager limit only
+    // arrives while rank 0 polls): that time is not a worker's silence.
+    const auto deaf_to = Clock::now();
+    for (auto& k : ranks) k.last_seen = std::min(deaf_to, k.last_seen + (deaf_to - deaf_from));
     bool busy = false, serving = false;
     for (int r = 1; r < size; ++r) {
       const Rank& k = ranks[static_cast<std::size_t>(r)];
