@@ -279,10 +279,8 @@ void World::update_wall_candidates() {
       // overlap check (floor grains beyond an infinite gate plane).
       if (!p_.fixed[i] && walls_[w].distance(p_.x[i]) < p_.r[i] + skin_) {
         wall_near_[w].push_back(static_cast<int>(i));
-      } else if (wall_touch_[slot]) {  // cannot be touching: a stale history would linger
-        wall_fs_[slot].setZero();
-        wall_mr_[slot].setZero();
-        wall_touch_[slot] = 0;
+      } else {  // cannot be touching: a stale history would linger
+        open_wall_contact(slot);
       }
     }
   }
@@ -316,11 +314,7 @@ void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
       const double ri = p_.r[i];
       const double h = wall.active ? wall.distance(p_.x[i]) : ri;
       if (h >= ri) {
-        if (wall_touch_[slot]) {
-          wall_fs_[slot].setZero();
-          wall_mr_[slot].setZero();
-          wall_touch_[slot] = 0;
-        }
+        open_wall_contact(slot);
         continue;
       }
       wall_touch_[slot] = 1;
@@ -361,9 +355,9 @@ void World::smooth_wall_forces(std::size_t w, const int* first, const int* last,
   const double* __restrict r = p_.r.data();
   const Vec3* __restrict x = p_.x.data();
   Vec3* __restrict f = p_.f.data();
-  Vec3* __restrict fs = wall_fs_.data() + base;
-  Vec3* __restrict mr = wall_mr_.data() + base;
-  std::uint8_t* __restrict touch = wall_touch_.data() + base;
+  Vec3* fs = wall_fs_.data() + base;  // not restrict: open_wall_contact writes them too
+  Vec3* mr = wall_mr_.data() + base;
+  std::uint8_t* touch = wall_touch_.data() + base;
   Vec3 total = Vec3::Zero();
   int contacts = 0;
   double max_overlap = acc.max_overlap;
@@ -375,11 +369,7 @@ void World::smooth_wall_forces(std::size_t w, const int* first, const int* last,
     // The springs are kept at zero as the general law keeps them, in case this wall
     // or the law had friction before.
     if (h >= ri) {
-      if (touch[i]) {
-        fs[i].setZero();
-        mr[i].setZero();
-        touch[i] = 0;
-      }
+      open_wall_contact(base + static_cast<std::size_t>(i));
       continue;
     }
     fs[i].setZero();

@@ -139,6 +139,13 @@ class World {
   int block_lo(int tid) const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
+  // A grain-wall contact that is open (or cannot be closed) keeps no history.
+  void open_wall_contact(std::size_t slot) {
+    if (!wall_touch_[slot]) return;
+    wall_fs_[slot].setZero();
+    wall_mr_[slot].setZero();
+    wall_touch_[slot] = 0;
+  }
   void smooth_wall_forces(std::size_t w, const int* first, const int* last, ThreadAcc& acc, WallPartial& sum);
   void external_forces(int begin, int end);
   void check_finite_and_overlap();
