@@ -24,6 +24,14 @@ int thread_id() {
 #endif
 }
 
+int team_size() {
+#ifdef _OPENMP
+  return omp_get_num_threads();
+#else
+  return 1;
+#endif
+}
+
 // The pair loop and the damping read arrays of Vec3 as flat arrays of doubles.
 static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are read as flat doubles");
 
@@ -305,7 +313,7 @@ void World::wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part) {
     const auto first = std::lower_bound(near.begin(), near.end(), begin);
     const auto last = std::lower_bound(first, near.end(), end);
     if (!(wall.frictional && frictional)) {
-      smooth_wall_forces(w, &*first, &*first + (last - first), acc, sum);
+      smooth_wall_forces(w, near.data() + (first - near.begin()), near.data() + (last - near.begin()), acc, sum);
       continue;
     }
     for (auto it = first; it != last; ++it) {
@@ -488,6 +496,47 @@ int World::block_lo(int tid) const {
   return static_cast<int>(static_cast<long long>(n) * tid / nt);
 }
 
+// Block `blk`'s pair rows: its grains' forces cleared, then its pairs' forces on
+// them written in place and those on grains above the block into its buffer,
+// cleared first over the reach of its list entries. No thread writes another's
+// block, so no barrier is needed before this.
+void World::block_pairs(int blk, bool periodic, bool frictional) {
+  const int lo = row_lo_[blk], hi = row_lo_[blk + 1], reach = std::max(hi, reach_[blk]);
+  ForceSink out{p_.f.data(), p_.t.data(), p_.f.data(), p_.t.data(), hi};
+  if (opt_.threads > 1) {
+    out.buf_f = buf_f_[blk].data();
+    out.buf_t = buf_t_[blk].data();
+    std::fill(out.buf_f + hi, out.buf_f + reach, Vec3::Zero());
+    std::fill(out.buf_t + hi, out.buf_t + reach, Vec3::Zero());
+  }
+  std::fill(p_.f.begin() + lo, p_.f.begin() + hi, Vec3::Zero());
+  std::fill(p_.t.begin() + lo, p_.t.begin() + hi, Vec3::Zero());
+  ThreadAcc& acc = acc_[blk];
+  const int chunk = 64;  // rows per call: the batch flushes at the end of each
+  for (int b = lo; b < hi; b += chunk) {
+    const int e = std::min(hi, b + chunk);
+    if (periodic)
+      frictional ? force_range<true, true>(b, e, out, acc) : force_range<true, false>(b, e, out, acc);
+    else
+      frictional ? force_range<false, true>(b, e, out, acc) : force_range<false, false>(b, e, out, acc);
+  }
+}
+
+// The lower blocks' buffered forces on block `blk`'s grains, in block order:
+// deterministic for a thread count.
+void World::add_lower_buffers(int blk) {
+  const int lo = row_lo_[blk], hi = row_lo_[blk + 1];
+  for (int s = 0; s < blk; ++s) {
+    const Vec3* bf = buf_f_[s].data();
+    const Vec3* bt = buf_t_[s].data();
+    const int top = std::min(hi, reach_[s]);
+    for (int i = std::max(lo, row_lo_[s + 1]); i < top; ++i) {
+      p_.f[i] += bf[i];
+      p_.t[i] += bt[i];
+    }
+  }
+}
+
 // One parallel region per force evaluation. Each thread owns one block of grains:
 // it clears their forces, runs their pair rows (forces on grains above the block go
 // to its buffer), adds the buffered forces the blocks below put on its grains, then
@@ -511,43 +560,21 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
 
 #pragma omp parallel num_threads(nt)
   {
-    const int tid = thread_id();
-    const int lo = row_lo_[tid], hi = row_lo_[tid + 1], reach = std::max(hi, reach_[tid]);
-    ForceSink out{p_.f.data(), p_.t.data(), p_.f.data(), p_.t.data(), hi};
-    if (nt > 1) {
-      out.buf_f = buf_f_[tid].data();
-      out.buf_t = buf_t_[tid].data();
-      std::fill(out.buf_f + hi, out.buf_f + reach, Vec3::Zero());
-      std::fill(out.buf_t + hi, out.buf_t + reach, Vec3::Zero());
-    }
-    std::fill(p_.f.begin() + lo, p_.f.begin() + hi, Vec3::Zero());
-    std::fill(p_.t.begin() + lo, p_.t.begin() + hi, Vec3::Zero());
-    // No barrier here: a thread writes only its own block of the grains' arrays and
-    // its own buffer.
-    const int chunk = 64;  // rows per call: the batch flushes at the end of each
-    for (int b = lo; b < hi; b += chunk) {
-      const int e = std::min(hi, b + chunk);
-      if (periodic)
-        frictional ? force_range<true, true>(b, e, out, acc_[tid]) : force_range<true, false>(b, e, out, acc_[tid]);
-      else
-        frictional ? force_range<false, true>(b, e, out, acc_[tid]) : force_range<false, false>(b, e, out, acc_[tid]);
-    }
+    // One block per thread; a smaller team (a build without OpenMP, a thread limit)
+    // takes the blocks in turn, so that every grain is still done.
+    const int tid = thread_id(), team = team_size();
+    for (int blk = tid; blk < nt; blk += team) block_pairs(blk, periodic, frictional);
 #pragma omp barrier
-    // The lower blocks' buffers in thread order: deterministic for a thread count.
-    for (int s = 0; s < tid; ++s) {
-      const Vec3* bf = buf_f_[s].data();
-      const Vec3* bt = buf_t_[s].data();
-      const int top = std::min(hi, reach_[s]);
-      for (int i = std::max(lo, row_lo_[s + 1]); i < top; ++i) {
-        p_.f[i] += bf[i];
-        p_.t[i] += bt[i];
-      }
+    if (tid == 0) t_pairs += seconds_since(clock);  // thread 0 alone reads and resets the clock
+    for (int blk = tid; blk < nt; blk += team) {
+      const int lo = row_lo_[blk], hi = row_lo_[blk + 1];
+      add_lower_buffers(blk);
+      if (tid == 0) t_pairs += seconds_since(clock);
+      wall_forces(lo, hi, acc_[blk], wall_part_.data() + static_cast<std::size_t>(blk) * nw);
+      if (tid == 0) t_walls += seconds_since(clock);
+      external_forces(lo, hi);
+      if (kick) half_kick(lo, hi, acc_[blk]);
     }
-    if (tid == 0) t_pairs = seconds_since(clock);
-    wall_forces(lo, hi, acc_[tid], wall_part_.data() + static_cast<std::size_t>(tid) * nw);
-    if (tid == 0) t_walls = seconds_since(clock);
-    external_forces(lo, hi);
-    if (kick) half_kick(lo, hi, acc_[tid]);
   }
 
   for (std::size_t w = 0; w < nw; ++w) {
@@ -593,14 +620,16 @@ bool World::drift(bool listed) {
   bool stale = false;
   // Each thread drifts the block whose forces it evaluated: the lines are in its cache.
 #pragma omp parallel num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
-  for (int i = block_lo(thread_id()), end = block_lo(thread_id() + 1); i < end; ++i) {
-    a.kick(i, half);
-    a.x[i] += dt * a.v[i];
-    if constexpr (Periodic) dom.wrap(a.x[i]);
-    if (!listed) continue;
-    Vec3 d = a.x[i] - xb[i];
-    if constexpr (Periodic) dom.min_image(d);
-    stale |= NeighborList::moved_too_far(d, r[i], rb[i], skin);
+  for (int blk = thread_id(); blk < opt_.threads; blk += team_size()) {
+    for (int i = block_lo(blk), end = block_lo(blk + 1); i < end; ++i) {
+      a.kick(i, half);
+      a.x[i] += dt * a.v[i];
+      if constexpr (Periodic) dom.wrap(a.x[i]);
+      if (!listed) continue;
+      Vec3 d = a.x[i] - xb[i];
+      if constexpr (Periodic) dom.min_image(d);
+      stale |= NeighborList::moved_too_far(d, r[i], rb[i], skin);
+    }
   }
   return stale;
 }

@@ -29,7 +29,6 @@ struct alignas(64) ThreadAcc {
   long max_overlap_i = -1;
   bool finite = true;        // the thread's grains ended the step with finite x, v, w
 };
-// One thread's sum over its grains of the force on them from one wall.
 // Where a thread's pair loop puts forces and torques: grains below `bound` (its own
 // block) in the grains' arrays, grains at or above it in the thread's buffers.
 struct ForceSink {
@@ -40,6 +39,7 @@ struct ForceSink {
   int bound;
 };
 
+// One thread's sum over its grains of the force on them from one wall.
 struct alignas(64) WallPartial {
   Vec3 force = Vec3::Zero();
   int contacts = 0;
@@ -136,6 +136,8 @@ class World {
   template <bool Periodic, bool Friction>
   void force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc);
   void assign_blocks();
+  void block_pairs(int blk, bool periodic, bool frictional);
+  void add_lower_buffers(int blk);
   int block_lo(int tid) const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);

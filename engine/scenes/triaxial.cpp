@@ -283,7 +283,8 @@ StageReport servo_to_equilibrium(Rig& rig, const std::string& name, double targe
   throw StageFailed("stage " + name + " did not reach equilibrium within its budget of " +
                     std::to_string(cfg.prep_step_budget) + " steps: wall stress error " + fmt(r.stress_error) +
                     " (tolerance " + fmt(cfg.stress_tolerance) + "), unbalanced-force ratio " + fmt(r.ufr) +
-                    " (tolerance " + fmt(cfg.ufr_tolerance) + "), mean stress " + fmt(r.mean_stress) +
+                    (check_ufr ? " (tolerance " + fmt(cfg.ufr_tolerance) + ")" : " (not judged in this stage)") +
+                    ", mean stress " + fmt(r.mean_stress) +
                     " Pa for a target of " + fmt(target_p) + " Pa, porosity " + fmt(r.porosity));
 }
 
