@@ -487,13 +487,18 @@ void World::assign_blocks() {
   blocks_builds_ = nl_.builds();
 }
 
+// Whether the blocks were cut for this many threads and grains (the list may have
+// been rebuilt since).
+bool World::blocks_fit() const {
+  const std::size_t nt = static_cast<std::size_t>(opt_.threads);
+  return row_lo_.size() == nt + 1 && row_lo_[nt] == static_cast<int>(p_.size());
+}
+
 // First grain of a thread's block: the blocks of the last force evaluation, or an
 // even split before there are any.
 int World::block_lo(int tid) const {
-  const int n = static_cast<int>(p_.size());
-  const int nt = opt_.threads;
-  if (row_lo_.size() == static_cast<std::size_t>(nt) + 1 && row_lo_[nt] == n) return row_lo_[tid];
-  return static_cast<int>(static_cast<long long>(n) * tid / nt);
+  if (blocks_fit()) return row_lo_[tid];
+  return static_cast<int>(static_cast<long long>(p_.size()) * tid / opt_.threads);
 }
 
 // Block `blk`'s pair rows: its grains' forces cleared, then its pairs' forces on
@@ -501,7 +506,7 @@ int World::block_lo(int tid) const {
 // cleared first over the reach of its list entries. No thread writes another's
 // block, so no barrier is needed before this.
 void World::block_pairs(int blk, bool periodic, bool frictional) {
-  const int lo = row_lo_[blk], hi = row_lo_[blk + 1], reach = std::max(hi, reach_[blk]);
+  const int lo = row_lo_[blk], hi = row_lo_[blk + 1], reach = reach_[blk];  // reach >= hi
   ForceSink out{p_.f.data(), p_.t.data(), p_.f.data(), p_.t.data(), hi};
   if (opt_.threads > 1) {
     out.buf_f = buf_f_[blk].data();
@@ -546,10 +551,8 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   auto clock = std::chrono::steady_clock::now();
   if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
-  const int n = static_cast<int>(p_.size());
   const int nt = opt_.threads;
-  if (nl_.builds() != blocks_builds_ || row_lo_.size() != static_cast<std::size_t>(nt) + 1 || row_lo_[nt] != n)
-    assign_blocks();
+  if (nl_.builds() != blocks_builds_ || !blocks_fit()) assign_blocks();
   times_.neighbor += seconds_since(clock);
   const std::size_t nw = walls_.size();
   acc_.assign(nt, ThreadAcc{});

@@ -138,6 +138,7 @@ class World {
   void assign_blocks();
   void block_pairs(int blk, bool periodic, bool frictional);
   void add_lower_buffers(int blk);
+  bool blocks_fit() const;
   int block_lo(int tid) const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
