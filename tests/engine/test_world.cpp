@@ -44,11 +44,27 @@ Particles cloud(std::size_t n, double phi, std::uint64_t seed, double vmax, Vec3
 }
 
 // 300 grains placed at solid fraction 0.35, then grown by 6%: many contacts from the
-// first step, none deep enough to trip the overlap check.
-Particles crowded_box(Vec3* hi_out) {
-  Particles p = cloud(300, 0.35, 11, 0.5, hi_out);
-  for (std::size_t i = 0; i < p.size(); ++i) p.r[i] *= 1.06;
-  return p;
+// first step, none deep enough to trip the overlap check. The domain is the box
+// [0, hi] they were placed in.
+struct CrowdedBox {
+  Particles p;
+  Domain dom;
+};
+CrowdedBox crowded_box() {
+  CrowdedBox box;
+  box.p = cloud(300, 0.35, 11, 0.5, &box.dom.hi);
+  for (std::size_t i = 0; i < box.p.size(); ++i) box.p.r[i] *= 1.06;
+  return box;
+}
+
+// Sum of |tangential spring| + |rolling spring| over the live contacts (walls only,
+// or all): nonzero when a frictional stage has left history.
+double spring_total(const World& w, bool walls_only) {
+  double total = 0.0;
+  w.for_each_contact([&](const ContactView& c) {
+    if (!walls_only || c.wall >= 0) total += c.fs.norm() + c.mr.norm();
+  });
+  return total;
 }
 
 double safe_dt(double factor = 0.1) { return factor * std::sqrt(mass_of(0.5e-3) / 3e7); }
@@ -160,16 +176,11 @@ TEST(StageSwitch, FrictionlessStageLeavesNoHistoryToReappear) {
   // spins and history in the pair loop), then friction again. The frictionless stage
   // must exert no torque, and the last stage must start from fresh springs: it runs
   // exactly as a world built from the same grains with no history at all.
-  Vec3 hi;
-  Particles p = crowded_box(&hi);
-  Domain dom;
-  dom.hi = hi;
+  const auto [p, dom] = crowded_box();
   const ContactParams frictional = law(3e7, 2.7e7, 30.0, 1.0, 0.2);
-  World w(p, box_walls(Vec3::Zero(), hi), dom, frictional, options(safe_dt()));
+  World w(p, box_walls(dom.lo, dom.hi), dom, frictional, options(safe_dt()));
   w.run(2000);
-  double spring = 0.0;
-  w.for_each_contact([&](const ContactView& c) { spring += c.fs.norm() + c.mr.norm(); });
-  ASSERT_GT(spring, 0.0) << "the first stage must leave history to clear";
+  ASSERT_GT(spring_total(w, false), 0.0) << "the first stage must leave history to clear";
 
   w.set_contact_params(law(3e7, 0.0));
   const std::vector<Vec3> spins = w.particles().w;
@@ -198,20 +209,13 @@ TEST(StageSwitch, WallTurnedSmoothDropsItsSpringsAndPushesAlongItsNormal) {
   // had friction and rolling resistance keeps no spring once it turns smooth, even
   // for contacts that stay closed across the switch, and pushes along its normal
   // with kn * overlap.
-  Vec3 hi;
-  Particles p = crowded_box(&hi);
-  Domain dom;
-  dom.hi = hi;
-  std::vector<Wall> walls = box_walls(Vec3::Zero(), hi);
+  const auto [p, dom] = crowded_box();
+  std::vector<Wall> walls = box_walls(dom.lo, dom.hi);
   for (auto& wall : walls) wall.frictional = wall.rolling = true;
   const double kn = 3e7;
   World w(p, walls, dom, law(kn, 2.7e7, 30.0, 1.0, 0.2), options(safe_dt()));
   w.run(2000);
-  double spring = 0.0;
-  w.for_each_contact([&](const ContactView& c) {
-    if (c.wall >= 0) spring += c.fs.norm() + c.mr.norm();
-  });
-  ASSERT_GT(spring, 0.0) << "the walls must hold springs before they turn smooth";
+  ASSERT_GT(spring_total(w, true), 0.0) << "the walls must hold springs before they turn smooth";
 
   for (auto& wall : w.walls()) wall.frictional = wall.rolling = false;
   w.run(1);  // one step: nearly every wall contact is still the one it was
@@ -293,10 +297,7 @@ TEST(Determinism, RowBlocksAgreeWithOneThread) {
   // Pair rows are split into one contiguous block per thread and the threads' force
   // buffers summed after. A crowded box, every grain in contact from the start, on
   // 1 and 3 threads: the same run to rounding (sums regroup across blocks).
-  Vec3 hi;
-  Particles p = crowded_box(&hi);
-  Domain dom;
-  dom.hi = hi;
+  const auto [p, dom] = crowded_box();
   auto run = [&](const Particles& start, const Domain& d, int threads, long steps) {
     World w(start, box_walls(d.lo, d.hi), d, law(3e7, 2.7e7, 30.0, 1.0, 0.2), options(safe_dt(), threads));
     w.run(steps);
