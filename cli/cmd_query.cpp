@@ -17,7 +17,7 @@ void add_query(CLI::App& app, int& exit_code) {
   cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
   cmd->add_option("--job", a->job, "only this job's tasks");
   cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable");
-  cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated; default all)")->delimiter(',');
+  cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated), or all; default: every metric in CSV and JSON, the scene's headline metrics in a table")->delimiter(',');
   cmd->add_option("--format", a->format, "table, csv or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
@@ -30,7 +30,9 @@ void add_query(CLI::App& app, int& exit_code) {
         std::cerr << "demcal: error: --job: no job named \"" << a->job << "\"\n";
         return kBadInput;
       }
-      jobs::print_rows(std::cout, jobs::select_rows(store, a->job, where), a->metrics, format);
+      const int hidden = jobs::print_rows(std::cout, jobs::select_rows(store, a->job, where), a->metrics, format);
+      if (hidden > 0)
+        std::cout << "(" << hidden << " more metrics per task: --metrics all, or --format csv or json)\n";
       return kOk;
     });
   });

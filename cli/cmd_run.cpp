@@ -47,7 +47,10 @@ int run(const RunArgs& a) {
 #else
   const jobs::RunSummary s = jobs::run_job(store, job, opt);
 #endif
-  jobs::print_rows(std::cout, jobs::select_rows(store, job.name, {}), {}, format);
+  const int hidden = jobs::print_rows(std::cout, jobs::select_rows(store, job.name, {}), {}, format);
+  if (hidden > 0)
+    std::cout << "(" << hidden << " more metrics per task: demcal query --db " << a.db << " --job " << job.name
+              << " --metrics all, or --format csv or json)\n";
   std::cerr << "job " << job.name << (shard.active() ? " shard " + shard.label() : std::string()) << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
             << s.unfinished << " unfinished, of " << s.total << "\n";
   if (s.interrupted || s.failed > 0 || s.unfinished > 0) return kRuntime;

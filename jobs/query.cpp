@@ -1,6 +1,7 @@
 #include "query.hpp"
 
 #include "job_error.hpp"
+#include "scene_registry.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -76,12 +77,35 @@ std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool 
   return out;
 }
 
-std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, const std::vector<std::string>& asked) {
+std::vector<std::string> stored_metrics(const std::vector<ResultRow>& rows) {
   std::vector<std::string> stored;
   for (const auto& r : rows)
     for (const auto& m : r.metrics)
       if (std::find(stored.begin(), stored.end(), m.first) == stored.end()) stored.push_back(m.first);
-  if (asked.empty()) return stored;
+  return stored;
+}
+
+bool asks_all(const std::vector<std::string>& asked) { return asked.size() == 1 && asked[0] == "all"; }
+
+// The headline metrics of the rows' scenes that some row stores, in the scenes' order.
+std::vector<std::string> headline_metrics(const std::vector<ResultRow>& rows, const std::vector<std::string>& stored) {
+  std::vector<std::string> out;
+  std::set<std::string> scenes;
+  for (const auto& r : rows) {
+    if (!scenes.insert(r.task.scene).second) continue;
+    const SceneDef* def = find_scene(r.task.scene);
+    if (!def) continue;
+    for (const auto& m : def->headline)
+      if (std::find(stored.begin(), stored.end(), m) != stored.end() &&
+          std::find(out.begin(), out.end(), m) == out.end())
+        out.push_back(m);
+  }
+  return out;
+}
+
+std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, const std::vector<std::string>& asked) {
+  const std::vector<std::string> stored = stored_metrics(rows);
+  if (asked.empty() || asks_all(asked)) return stored;
   // A name no finished task stores is a typo, as an unknown --where key is (while
   // nothing has finished, every metric is legitimately absent).
   if (!stored.empty())
@@ -210,11 +234,26 @@ Format parse_format(const std::string& text) {
   throw JobError("--format", "expected table, csv or json, got \"" + text + "\"");
 }
 
-void print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
-                Format format) {
-  if (format == Format::json) return print_json(out, rows, metrics);
+int print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
+               Format format) {
+  if (format == Format::json) {
+    print_json(out, rows, metrics);
+    return 0;
+  }
+  if (format == Format::table && metrics.empty()) {
+    // Every metric of a triaxial task is ~60 columns: a table shows the headline ones.
+    const auto stored = stored_metrics(rows);
+    const auto headline = headline_metrics(rows, stored);
+    if (!headline.empty()) {
+      print_table(out, build(rows, headline, true));
+      return static_cast<int>(stored.size() - headline.size());
+    }
+  }
   const Table t = build(rows, metrics, format == Format::table);
-  if (format == Format::table) return print_table(out, t);
+  if (format == Format::table) {
+    print_table(out, t);
+    return 0;
+  }
   for (const auto* line : {&t.header}) {
     for (std::size_t c = 0; c < line->size(); ++c) out << (c ? "," : "") << csv_escape((*line)[c]);
     out << "\n";
@@ -223,6 +262,7 @@ void print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std
     for (std::size_t c = 0; c < r.size(); ++c) out << (c ? "," : "") << csv_escape(r[c]);
     out << "\n";
   }
+  return 0;
 }
 
 }  // namespace demcal::jobs

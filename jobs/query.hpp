@@ -29,9 +29,12 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
 enum class Format { table, csv, json };
 Format parse_format(const std::string& text);
 
-// metrics empty: every metric any row has. In table form only the parameters that
-// vary between rows are shown (all of them in CSV and JSON).
-void print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
-                Format format);
+// metrics empty: every metric any row has, except in table form, which shows the
+// headline metrics of the rows' scenes (SceneDef::headline) and returns how many
+// stored metrics it left out (0 otherwise); {"all"}: every metric in every form. In
+// table form only the parameters that vary between rows are shown (all of them in
+// CSV and JSON).
+int print_rows(std::ostream& out, const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics,
+               Format format);
 
 }  // namespace demcal::jobs

@@ -33,6 +33,8 @@ struct SceneDef {
   // Throws JobError naming the job-file path.
   std::function<void(nlohmann::json& params, const std::string& fidelity)> resolve;
   std::function<SceneOutput(const nlohmann::json& params, const RunContext& ctx)> run;
+  // The metrics a reader wants first: what a table shows unless asked for others.
+  std::vector<std::string> headline;
 };
 
 const SceneDef* find_scene(const std::string& name);

@@ -159,6 +159,10 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 
 }  // namespace
 
-SceneDef scene_repose() { return SceneDef{kSection, repose_params(), resolve, run}; }
+SceneDef scene_repose() {
+  return SceneDef{kSection, repose_params(), resolve, run,
+                  /*headline=*/{"repose_deg", "repose_fit_err_deg", "runout_ratio", "time_to_rest_s", "particles",
+                                "wall_s"}};
+}
 
 }  // namespace demcal::jobs

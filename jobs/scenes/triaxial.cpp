@@ -201,6 +201,10 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 
 }  // namespace
 
-SceneDef scene_triaxial() { return SceneDef{kSection, triaxial_params(), resolve, run}; }
+SceneDef scene_triaxial() {
+  return SceneDef{kSection, triaxial_params(), resolve, run,
+                  /*headline=*/{"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_initial", "eps_v_final",
+                                "max_inertial_number", "particles", "wall_s"}};
+}
 
 }  // namespace demcal::jobs

@@ -58,6 +58,15 @@ TEST(Cli, RunQueryStatusAndResume) {
   Result r = run_demcal({"run", "j.json", "--workers", "2"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("drift_per_million_steps"), std::string::npos) << r.out;
+  // The table shows the scene's headline metrics and says how to get the rest.
+  EXPECT_EQ(r.out.find("energy_initial"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("more metrics per task: demcal query --db demcal.db --job small --metrics all"),
+            std::string::npos)
+      << r.out;
+  Result all = run_demcal({"query", "--metrics", "all"}, d.path.string());
+  ASSERT_EQ(all.rc, 0) << all.err;
+  EXPECT_NE(all.out.find("energy_initial"), std::string::npos) << all.out;
+  EXPECT_EQ(all.out.find("more metrics"), std::string::npos) << all.out;
   const auto before = tasks_of(d.file("demcal.db"), "small");
   ASSERT_EQ(before.size(), 3u);
   for (const auto& t : before) {
