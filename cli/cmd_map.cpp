@@ -33,6 +33,7 @@ void add_map(CLI::App& app, int& exit_code) {
       std::vector<jobs::Where> where;
       for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
       const std::string out = a->out.empty() ? "map_" + a->metric + ".png" : a->out;
+      require_writable_file("--out", out);
       require_db(a->db);
       db::Store store(a->db, /*read_only=*/true);
       const std::vector<std::string> jobs = a->job.empty() ? std::vector<std::string>{} : std::vector<std::string>{a->job};

@@ -24,6 +24,7 @@ void add_plot(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "output file, .png or .svg")->required();
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
+      require_writable_file("--out", a->out);
       require_db(a->db);
       db::Store store(a->db, /*read_only=*/true);
       const auto task = store.task(a->task);

@@ -33,10 +33,13 @@ int run(const RunArgs& a) {
   // Validate completely before the database is even opened: an invalid job
   // writes nothing anywhere.
   const jobs::Job job = jobs::load_job_file(a.job);
-  db::Store store(a.db);
+  for (const auto& n : job.notes) std::cerr << "demcal: note: " << a.job << ": " << n << "\n";
+  if (a.db.empty()) throw jobs::JobError("--db", "empty path");
   jobs::RunOptions opt;
-  opt.workers = a.workers;
   opt.out_dir = a.out.empty() ? default_out_dir(a.db) : a.out;
+  require_writable_dir(a.out.empty() ? "--db" : "--out", opt.out_dir);  // before the database is written
+  db::Store store(a.db);
+  opt.workers = a.workers;
   opt.retry_failed = a.retry_failed;
   opt.terminal = isatty(STDERR_FILENO) != 0;
   opt.log = &std::cerr;
@@ -53,6 +56,9 @@ int run(const RunArgs& a) {
               << " --metrics all, or --format csv or json)\n";
   std::cerr << "job " << job.name << (shard.active() ? " shard " + shard.label() : std::string()) << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
             << s.unfinished << " unfinished, of " << s.total << "\n";
+  if (s.failed > 0 && !s.interrupted)
+    std::cerr << "why they failed: demcal status --db " << a.db << " --job " << job.name
+              << "; to run them again: demcal run " << a.job << " --db " << a.db << " --retry-failed\n";
   if (s.interrupted || s.failed > 0 || s.unfinished > 0) return kRuntime;
   return kOk;
 }

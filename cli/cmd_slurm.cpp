@@ -99,6 +99,7 @@ int slurm(SlurmArgs a) {
   check_token("--time", a.time, "[0-9]{1,6}(-[0-9]{1,2})?(:[0-9]{1,2}){0,2}", "a SLURM time limit such as 30, 4:00:00 or 1-12:00:00");
   const jobs::Job job = jobs::load_job_file(a.job);  // the job must be valid before anything is written
   if (a.out.empty()) a.out = "demcal-" + job.name + ".slurm.sh";
+  require_writable_file("--out", a.out);
   const std::string text = script(a, job);
   {
     std::ofstream f(a.out, std::ios::trunc);

@@ -98,6 +98,7 @@ int study(const StudyArgs& a) {
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  require_writable_dir(a.out.empty() ? "--db" : "--out", o.out_dir);  // before the database is written
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {
     const jobs::GrazingStudy s = jobs::run_grazing_study(o);
@@ -115,9 +116,13 @@ int study(const StudyArgs& a) {
   std::cout << "series           dt_factor  status    drift/sim-s    wall-s/sim-s  pareto\n";
   for (const auto& p : s.points) {
     char line[200];
-    std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12.3e  %12.3e  %s\n",
-                  p.friction ? "friction+rolling" : "frictionless", p.dt_factor, p.ok ? "ok" : "unstable",
-                  p.ok ? p.drift : 0.0, p.ok ? p.cost : 0.0, p.pareto ? "*" : "");
+    if (p.ok)
+      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12.3e  %12.3e  %s\n",
+                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, "ok", p.drift, p.cost,
+                    p.pareto ? "*" : "");
+    else  // an unstable run has no drift or cost to show
+      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
+                    p.dt_factor, "unstable", "-", "-");
     std::cout << line;
   }
   std::cout << s.recommendation << "\n";

@@ -17,6 +17,11 @@ int guarded(const std::string& context, const std::function<int()>& body);
 std::string default_out_dir(const std::string& db_path);
 // Throws JobError("--db") when the database does not exist (read-only commands).
 void require_db(const std::string& db_path);
+// Checks before anything is written, creating nothing: throws JobError(flag) naming
+// the path and the reason when the folder (or its nearest existing parent) is not a
+// writable folder, or when the file's folder does not exist or is not writable.
+void require_writable_dir(const std::string& flag, const std::string& dir);
+void require_writable_file(const std::string& flag, const std::string& file);
 
 void add_validate(CLI::App& app, int& exit_code);
 void add_run(CLI::App& app, int& exit_code);

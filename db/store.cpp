@@ -78,11 +78,20 @@ std::optional<std::int64_t> Store::find_job(const std::string& name) {
 }
 
 std::int64_t Store::put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks,
-                            bool partial) {
+                            bool partial, std::vector<std::int64_t>* dropped) {
   Transaction t(conn_);
   const double now = unix_now();
   std::int64_t job_id;
+  std::set<std::int64_t> before;
+  auto linked = [this](std::int64_t id) {
+    std::set<std::int64_t> ids;
+    Statement s = conn_.prepare("SELECT task_id FROM job_tasks WHERE job_id = ?");
+    s.bind(1, id);
+    while (s.step()) ids.insert(s.int64(0));
+    return ids;
+  };
   if (auto id = find_job(name)) {
+    if (dropped) before = linked(*id);
     job_id = *id;
     Statement old_spec = conn_.prepare("SELECT spec_json FROM jobs WHERE id = ?");
     old_spec.bind(1, job_id);
@@ -107,6 +116,12 @@ std::int64_t Store::put_job(const std::string& name, const std::string& spec_jso
     find.reset();
     link.reset();
     link.bind(1, job_id).bind(2, tasks[i].idx >= 0 ? tasks[i].idx : static_cast<std::int64_t>(i)).bind(3, task_id).run();
+  }
+  if (dropped) {
+    const std::set<std::int64_t> after = linked(job_id);
+    dropped->clear();
+    for (std::int64_t id : before)
+      if (!after.count(id)) dropped->push_back(id);
   }
   t.commit();
   return job_id;

@@ -58,9 +58,11 @@ class Store {
   // Records the job (by name; a changed spec replaces the old one) and links it to
   // its tasks, creating those whose key is new. Returns the job id.
   // partial (a shard, `demcal run --shard`): `tasks` is part of the job, linked at
-  // their idx; links already there are kept unless the spec changed.
+  // their idx; links already there are kept unless the spec changed. `dropped`, if
+  // given, receives the tasks the job held before and no longer does (a changed
+  // spec); they and their results stay in the database.
   std::int64_t put_job(const std::string& name, const std::string& spec_json, const std::vector<NewTask>& tasks,
-                       bool partial = false);
+                       bool partial = false, std::vector<std::int64_t>* dropped = nullptr);
   std::optional<std::int64_t> find_job(const std::string& name);
 
   // Tasks of a job in expansion order, or every task when job is empty.

@@ -97,6 +97,7 @@ void read_settings(const nlohmann::json& j, Job& job) {
 void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
   const ParamSet set = read_params(j, scene);
   for (const auto& a : set.axes) job.axes.push_back(a.name);
+  job.notes = set.notes;
   const std::uint64_t n = grid_size(set, job.replicas);
   if (n > kMaxTasks)
     throw JobError("grid", "expands to " + std::to_string(n) + " tasks, more than the limit of " + std::to_string(kMaxTasks));

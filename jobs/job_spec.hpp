@@ -30,6 +30,7 @@ struct Job {
   bool snapshots = false;
   std::vector<std::string> axes;  // grid axes, in expansion order
   std::vector<Task> tasks;
+  std::vector<std::string> notes;  // what the file says that is legal but easy to miss
 };
 
 // Throw JobError naming the JSON path (or "" for whole-file problems such as a

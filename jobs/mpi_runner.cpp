@@ -167,8 +167,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
   StopSignalGuard guard;
   const std::string token = runner_token();
-  const std::int64_t job_id =
-      store.put_job(job.name, job.spec.dump(), tasks_to_record(job, options.shard), options.shard.active());
+  const std::int64_t job_id = record_job(store, job, options.shard, log);
   if (int n = store.requeue_dead(runner_alive))
     log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (options.retry_failed)

@@ -78,8 +78,7 @@ class Runner {
 };
 
 void Runner::prepare() {
-  const std::int64_t job_id =
-      store_.put_job(job_.name, job_.spec.dump(), tasks_to_record(job_, opt_.shard), opt_.shard.active());
+  const std::int64_t job_id = record_job(store_, job_, opt_.shard, *opt_.log);
   if (opt_.shard.active())
     *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
               << " = " << opt_.shard.index - 1 << "\n";
@@ -271,12 +270,25 @@ RunSummary Runner::run() {
 
 }  // namespace
 
-std::vector<db::NewTask> tasks_to_record(const Job& job, const Shard& shard) {
+std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log) {
   std::vector<db::NewTask> tasks;
   for (const auto& t : job.tasks)
     if (shard.contains(t.index))
       tasks.push_back({t.key, job.scene, t.params.dump(), static_cast<std::int64_t>(t.index)});
-  return tasks;
+  std::vector<std::int64_t> dropped;
+  const std::int64_t id = store.put_job(job.name, job.spec.dump(), tasks, shard.active(), &dropped);
+  if (!dropped.empty()) {
+    // A job is its latest spec; without this line the tasks of an edited grid
+    // would leave the job (and its fits and maps) unannounced.
+    std::string ids;
+    for (std::size_t k = 0; k < dropped.size() && k < 10; ++k) ids += (k ? "," : "") + std::to_string(dropped[k]);
+    if (dropped.size() > 10) ids += ",...";
+    log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()
+        << " task(s) of the earlier spec are no longer part of it (ids " << ids
+        << "; they and their results stay in the database: demcal query --where task=ID). Give the job another "
+           "name to keep both\n";
+  }
+  return id;
 }
 
 std::string task_output_dir(const Job& job, const RunOptions& options) {

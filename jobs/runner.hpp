@@ -33,8 +33,10 @@ struct RunSummary {
 RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 
 // What the local and the MPI runner share.
-// The job's tasks to record, restricted to options.shard (with their expansion index).
-std::vector<db::NewTask> tasks_to_record(const Job& job, const Shard& shard);
+// Records the job and its tasks (restricted to options.shard, with their expansion
+// index) and returns its id. When the job's spec changed since the last run into
+// this database, says on `log` which tasks of the earlier spec it no longer holds.
+std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
 // The job's task counts at the end of a run, into the summary.

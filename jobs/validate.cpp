@@ -96,7 +96,9 @@ void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out)
     if (!v.is_array()) throw JobError(path, "expected a list of values, got " + describe(v));
     for (const auto& a : out.axes)
       if (a.name == k) throw JobError(path, "also given as a list at " + a.path);
-    out.base.erase(k);  // the grid overrides the base value
+    if (out.base.contains(k))  // the grid overrides the base value: say so, one of them is not used
+      out.notes.push_back(path + " replaces " + spec->path() + " = " + out.base[k].dump());
+    out.base.erase(k);
     out.axes.push_back(Axis{k, path, check_list(*spec, v, path)});
   }
 }

@@ -20,6 +20,7 @@ struct Axis {
 struct ParamSet {
   nlohmann::json base = nlohmann::json::object();  // flat name -> single value
   std::vector<Axis> axes;                          // in declaration order, then grid keys
+  std::vector<std::string> notes;                  // legal but easy to miss, for the user
 };
 
 ParamSet read_params(const nlohmann::json& job, const SceneDef& scene);

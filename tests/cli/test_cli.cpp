@@ -237,9 +237,37 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   EXPECT_NE(r.err.find("nope"), std::string::npos);
   r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  // An output folder that does not exist is the command line's fault, said before gnuplot runs.
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "no/e.png"},
+                 d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: the folder"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("gnuplot"), std::string::npos) << r.err;
   fs::remove(d.path / "demcal-out" / "plot" / (id + ".h5"));  // the artifact went missing after the run
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "g.png"}, d.path.string());
   EXPECT_EQ(r.rc, 1);
   EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.file("g.png")));
+}
+
+TEST(Cli, AnOutputFolderThatCannotBeWrittenWritesNoDatabase) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("small", {0.1}));
+  write(d.file("afile"), "x");
+  const Result r = run_demcal({"run", "j.json", "--db", "x.db", "--out", "afile/out"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: "), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("j.json: --out"), std::string::npos) << "a flag's fault, not the job file's: " << r.err;
+  EXPECT_FALSE(fs::exists(d.file("x.db")));
+  EXPECT_EQ(run_demcal({"run", "j.json", "--db", ""}, d.path.string()).rc, 2);
+}
+
+TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
+  TempDir d;
+  write(d.file("a.json"), collision_job("small", {0.05, 0.1}));
+  write(d.file("b.json"), collision_job("small", {0.05, 0.2}));
+  ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
+  const Result r = run_demcal({"run", "b.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("1 task(s) of the earlier spec are no longer part of it"), std::string::npos) << r.err;
 }

@@ -184,6 +184,22 @@ TEST(Store, OverlappingJobsShareTasksByKey) {
   EXPECT_EQ(s.tasks("a").size(), 2u);
 }
 
+TEST(Store, AnEditedJobSaysWhichTasksLeftIt) {
+  TempDir d;
+  Store s(d.file("a.db"));
+  std::vector<std::int64_t> dropped{99};
+  s.put_job("a", R"({"grid":[1,2]})", tasks({"k1", "k2"}), false, &dropped);
+  EXPECT_TRUE(dropped.empty());
+  const std::int64_t k2 = s.tasks("a")[1].id;
+  s.put_job("a", R"({"grid":[1,2]})", tasks({"k1", "k2"}), false, &dropped);
+  EXPECT_TRUE(dropped.empty()) << "the same spec again drops nothing";
+  s.put_job("a", R"({"grid":[1,3]})", tasks({"k1", "k3"}), false, &dropped);
+  ASSERT_EQ(dropped.size(), 1u);
+  EXPECT_EQ(dropped[0], k2);
+  EXPECT_EQ(s.tasks("a").size(), 2u);
+  EXPECT_EQ(s.tasks().size(), 3u) << "the dropped task stays in the database";
+}
+
 TEST(Store, RequeuesTasksOfDeadWorkersAndReleases) {
   TempDir d;
   Store s(d.file("a.db"));

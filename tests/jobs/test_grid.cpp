@@ -65,6 +65,10 @@ TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
   ASSERT_EQ(job.tasks.size(), 1u);
   EXPECT_TRUE(job.tasks[0].params["theta_deg"].is_number_float());
   EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 30.0);
+  // Legal, but the section's value is not used: the job says so.
+  ASSERT_EQ(job.notes.size(), 1u);
+  EXPECT_EQ(job.notes[0], "grid.theta_deg replaces material.theta_deg = 5.0");
+  EXPECT_TRUE(parse(base()).notes.empty());
   // 30 and 30.0 are the same work: the same key.
   json k = base();
   k["material"]["theta_deg"] = 30.0;
