@@ -171,6 +171,20 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
                                 std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
   }
 
+  // A job without a (theta, eta) grid cannot be mapped or fitted whatever is pinned:
+  // say that before asking to pin anything.
+  {
+    std::set<std::string> th, et;
+    for (const auto& row : rows) {
+      if (row.r.params.contains("theta_deg")) th.insert(row.r.params["theta_deg"].dump());
+      if (row.r.params.contains("eta")) et.insert(row.r.params["eta"].dump());
+    }
+    if (th.size() < 2 || et.size() < 2)
+      throw JobError("--job", "job \"" + job + "\" has " + std::to_string(th.size()) + " theta_deg and " +
+                                  std::to_string(et.size()) +
+                                  " eta value(s); maps and fits need a grid over at least 2 of each");
+  }
+
   // Only replicas may be averaged: any other parameter that varies must be pinned.
   std::map<std::string, std::set<std::string>> seen;
   for (const auto& row : rows)

@@ -30,7 +30,9 @@ void add_query(CLI::App& app, int& exit_code) {
         std::cerr << "demcal: error: --job: no job named \"" << a->job << "\"\n";
         return kBadInput;
       }
-      const int hidden = jobs::print_rows(std::cout, jobs::select_rows(store, a->job, where), a->metrics, format);
+      const auto rows = jobs::select_rows(store, a->job, where);
+      if (rows.empty()) std::cerr << "demcal: no task matches" << (where.empty() ? "" : " the --where filters") << "\n";
+      const int hidden = jobs::print_rows(std::cout, rows, a->metrics, format);
       if (hidden > 0)
         std::cout << "(" << hidden << " more metrics per task: --metrics all, or --format csv or json)\n";
       return kOk;

@@ -67,7 +67,7 @@ std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool 
   for (const auto& r : rows)
     for (const auto& [k, v] : r.params.items())
       if (std::find(keys.begin(), keys.end(), k) == keys.end()) keys.push_back(k);
-  if (!varying_only || rows.size() < 2) return keys;
+  if (!varying_only) return keys;  // one row varies nothing: a table shows none (CSV and JSON all)
   std::vector<std::string> out;
   for (const auto& k : keys) {
     std::set<std::string> seen;
@@ -190,6 +190,26 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
   out << arr.dump(2) << "\n";
 }
 
+// A value no task could ever match is a typo, not an empty answer.
+void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
+  if (w.key == "status") {
+    static const char* const known[] = {"pending", "running", "done", "failed"};
+    if (std::find(std::begin(known), std::end(known), w.value) == std::end(known))
+      throw JobError("--where", "status is one of pending, running, done, failed; got \"" + w.value + "\"");
+    return;
+  }
+  bool numeric = false;
+  for (const auto& r : all) {
+    if (!r.params.contains(w.key)) continue;
+    if (!r.params[w.key].is_number()) return;
+    numeric = true;
+  }
+  char* end = nullptr;
+  std::strtod(w.value.c_str(), &end);
+  if (numeric && (end == w.value.c_str() || *end != '\0'))
+    throw JobError("--where", w.key + " is a number in every task; got \"" + w.value + "\"");
+}
+
 }  // namespace
 
 Where parse_where(const std::string& text) {
@@ -211,6 +231,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     const bool known = special(db::TaskRow{}, w.key) != nullptr ||
                        std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return r.params.contains(w.key); });
     if (!known && !all.empty()) throw JobError("--where", "no task has a parameter \"" + w.key + "\"");
+    check_where_value(all, w);
   }
   std::vector<ResultRow> out;
   for (auto& r : all) {

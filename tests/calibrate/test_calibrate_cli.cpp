@@ -186,6 +186,27 @@ TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
   r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "idle"}, dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+  // One theta, two sample sizes: the missing grid is said first, not "pin particles".
+  {
+    db::Store s(d.file("demcal.db"));
+    std::vector<db::NewTask> tasks;
+    for (double et : {0.0, 0.1})
+      for (int n : {500, 1000}) {
+        const nlohmann::json p = {{"theta_deg", 30.0}, {"eta", et}, {"particles", n}, {"seed", 1}};
+        tasks.push_back({"line:" + p.dump(), "triaxial", p.dump()});
+      }
+    s.put_job("line", "{}", tasks);
+    for (const auto& t : s.tasks("line")) {
+      s.claim(t.id, "test");
+      db::Outcome o;
+      o.status = "done";
+      o.metrics = {{"phi_peak_deg", 40.0}};
+      s.finish(t.id, "test", o);
+    }
+  }
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "line"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("has 1 theta_deg and"), std::string::npos) << r.err;
 }
 
 TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {

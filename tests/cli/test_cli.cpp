@@ -91,6 +91,20 @@ TEST(Cli, RunQueryStatusAndResume) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("no task stores a metric \"nosuch\""), std::string::npos) << r.err;
   EXPECT_EQ(run_demcal({"query", "--where", "novalue"}, d.path.string()).rc, 2);
+  // Values no task could match are typos, not empty answers.
+  r = run_demcal({"query", "--where", "status=finished"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("status is one of"), std::string::npos) << r.err;
+  r = run_demcal({"query", "--where", "dt_factor=abc"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("dt_factor is a number"), std::string::npos) << r.err;
+  r = run_demcal({"query", "--where", "dt_factor=0.3"}, d.path.string());
+  EXPECT_EQ(r.rc, 0);
+  EXPECT_NE(r.err.find("no task matches"), std::string::npos) << r.err;
+  // One row varies nothing: the table shows no parameter columns (JSON and CSV keep them).
+  r = run_demcal({"query", "--where", "dt_factor=0.1"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(r.out.find("sample_every"), std::string::npos) << r.out;
   EXPECT_EQ(run_demcal({"query", "--format", "xml"}, d.path.string()).rc, 2);
 
   r = run_demcal({"status"}, d.path.string());
