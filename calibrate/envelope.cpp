@@ -57,6 +57,7 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
 std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where) {
   if (!store.find_job(job)) throw jobs::JobError("--job", "no job named \"" + job + "\"");
   const auto rows = jobs::select_rows(store, job, where);
+  if (rows.empty()) throw jobs::JobError("--where", "no task of job \"" + job + "\" matches the filters");
   // The wrong kind of job is the first thing to say, before asking to pin a parameter.
   for (const auto& r : rows)
     if (!r.params.contains("confining_kpa") || !r.params.contains("theta_deg") || !r.params.contains("eta"))

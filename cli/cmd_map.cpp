@@ -8,6 +8,7 @@
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -90,23 +91,20 @@ void add_envelope(CLI::App& app, int& exit_code) {
         job = all.front();
       }
       const auto envs = calibrate::job_envelopes(store, job, where);
+      if (std::all_of(envs.begin(), envs.end(), [](const auto& e) { return !e.note.empty(); }))
+        throw jobs::JobError("--job", "job \"" + job + "\" has no (theta, eta) with finished tasks at two or more "
+                                      "confining pressures (" + envs.front().note + ")");
       std::printf("%8s %8s %4s %5s  %18s  %18s  %18s\n", "theta", "eta", "n", "p", "phi (deg)", "c (kPa)", "phi, c=0 (deg)");
-      int fitted = 0;
       for (const auto& e : envs) {
         if (!e.note.empty()) {
           std::printf("%8.4g %8.4g %4zu %5s  %s\n", e.theta, e.eta, e.sigma3_kpa.size(), "-", e.note.c_str());
           continue;
         }
-        ++fitted;
         std::printf("%8.4g %8.4g %4d %5d  %8.3f +- %-6.2g  %8.3g +- %-6.2g  %8.3f +- %-6.2g\n", e.theta, e.eta, e.env.n, e.env.pressures,
                     e.env.phi_deg, e.env.phi_se, e.env.c, e.env.c_se, e.env.phi0_deg, e.env.phi0_se);
       }
-      std::cout << "sigma1 = N sigma3 + 2 c sqrt(N), N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak);"
-                   " +- one standard error\n";
-      if (fitted == 0) {
-        std::cerr << "demcal: error: --job: job \"" << job << "\" has no (theta, eta) with two or more confining pressures\n";
-        return kBadInput;
-      }
+      std::cout << "n: peaks fitted, p: distinct confining pressures; sigma1 = N sigma3 + 2 c sqrt(N), "
+                   "N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak); +- one standard error\n";
       return kOk;
     });
   });

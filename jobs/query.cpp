@@ -1,6 +1,7 @@
 #include "query.hpp"
 
 #include "job_error.hpp"
+#include "params.hpp"
 #include "scene_registry.hpp"
 
 #include <algorithm>
@@ -111,9 +112,13 @@ std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, cons
   if (!stored.empty())
     for (const auto& a : asked)
       if (std::find(stored.begin(), stored.end(), a) == stored.end()) {
-        std::string known;
-        for (const auto& k : stored) known += (known.empty() ? "" : ", ") + k;
-        throw JobError("--metrics", "no task stores a metric \"" + a + "\" (stored: " + known + ")");
+        std::string known, guess = closest(a, stored);
+        for (const auto& k : stored) {
+          known += (known.empty() ? "" : ", ") + k;
+          if (k.rfind(a + "_", 0) == 0 && guess.empty()) guess = k;  // phi_peak -> phi_peak_deg (fit's names)
+        }
+        throw JobError("--metrics", "no task stores a metric \"" + a + "\"" +
+                                        (guess.empty() ? "" : " (did you mean \"" + guess + "\"?)") + "; stored: " + known);
       }
   return asked;
 }

@@ -238,6 +238,15 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   EXPECT_EQ(p, 3);
   EXPECT_NEAR(phi, phi_peak_fn(th, et), 1e-3);
   EXPECT_NEAR(c, 0.0, 1e-3);
+  // One pressure only: an error, and no table of rows that all say so.
+  const auto one = run_demcal({"envelope", "--job", "mc50"}, d.path.string());
+  EXPECT_EQ(one.rc, 2);
+  EXPECT_NE(one.err.find("two or more confining pressures"), std::string::npos) << one.err;
+  EXPECT_EQ(one.out, "");
+  // A filter that matches nothing says so, not "no data".
+  const auto none = run_demcal({"envelope", "--job", "mc", "--where", "theta_deg=99"}, d.path.string());
+  EXPECT_EQ(none.rc, 2);
+  EXPECT_NE(none.err.find("--where: no task of job \"mc\" matches"), std::string::npos) << none.err;
 }
 
 TEST(CalibrateRefine, RoundsConvergeOnTheTruthAndAreRecorded) {

@@ -90,6 +90,9 @@ TEST(Cli, RunQueryStatusAndResume) {
   r = run_demcal({"query", "--metrics", "dt,nosuch"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("no task stores a metric \"nosuch\""), std::string::npos) << r.err;
+  r = run_demcal({"query", "--metrics", "drift_per_million"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("did you mean \"drift_per_million_steps\"?"), std::string::npos) << r.err;
   EXPECT_EQ(run_demcal({"query", "--where", "novalue"}, d.path.string()).rc, 2);
   // Values no task could match are typos, not empty answers.
   r = run_demcal({"query", "--where", "status=finished"}, d.path.string());
