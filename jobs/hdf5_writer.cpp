@@ -121,6 +121,7 @@ engine::Series read_series(const std::string& path, const std::string& name) {
     std::vector<std::vector<double>> data;
     for (const auto& c : s.columns) {
       H5::DataSet ds = g.openDataSet(c);
+      s.units.push_back(ds.attrExists("units") ? read_string_attr(ds, "units") : "");
       hsize_t n = 0;
       ds.getSpace().getSimpleExtentDims(&n);
       std::vector<double> col(n);

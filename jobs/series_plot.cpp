@@ -98,13 +98,28 @@ void plot_series(const PlotRequest& r) {
       for (std::size_t i = 0; i < row.size(); ++i) d << (i ? " " : "") << row[i];
       d << "\n";
     }
+    // Columns in other units than the first y column's go on a second y axis: an
+    // angle of 40 deg and a strain of 0.01 on one axis would flatten the strain.
+    auto unit = [&](std::size_t col) { return col - 1 < s.units.size() ? s.units[col - 1] : std::string(); };
+    auto label = [&](const std::string& name, std::size_t col) {
+      return unit(col).empty() ? name : name + " [" + unit(col) + "]";
+    };
+    const std::string u1 = unit(yi[0]);
+    std::string y1, y2;
+    for (std::size_t i = 0; i < yi.size(); ++i) {
+      std::string& axis = unit(yi[i]) == u1 ? y1 : y2;
+      axis += (axis.empty() ? "" : ", ") + label(r.y[i], yi[i]);
+    }
     std::ofstream g(script);
     g << terminal_line(ext) << "set output " << quoted(r.out) << "\n"
       << "set title " << quoted(r.title.empty() ? r.series : r.title) << " noenhanced\n"
-      << "set xlabel " << quoted(r.x) << " noenhanced\nset key noenhanced\nset grid\n";
+      << "set xlabel " << quoted(label(r.x, xi)) << " noenhanced\nset ylabel " << quoted(y1)
+      << " noenhanced\nset key noenhanced\nset grid\n";
+    if (!y2.empty()) g << "set y2label " << quoted(y2) << " noenhanced\nset y2tics\nset ytics nomirror\n";
     g << "plot ";
     for (std::size_t i = 0; i < yi.size(); ++i)
-      g << (i ? ", " : "") << quoted(data) << " using " << xi << ":" << yi[i] << " with lines title " << quoted(r.y[i]);
+      g << (i ? ", " : "") << quoted(data) << " using " << xi << ":" << yi[i]
+        << (unit(yi[i]) == u1 ? " axes x1y1" : " axes x1y2") << " with lines title " << quoted(label(r.y[i], yi[i]));
     g << "\n";
   }
   try {

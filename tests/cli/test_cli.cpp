@@ -249,6 +249,13 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   r = run_demcal({"plot", id, "--series", "energy", "--x", "time", "--y", "total", "--out", "e.svg"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(slurp(d.file("e.svg")).find("<svg"), std::string::npos);
+  // Columns in two units: each axis labelled with its unit, the second on y2.
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total,time", "--out", "u.svg"},
+                 d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string svg = slurp(d.file("u.svg"));
+  EXPECT_NE(svg.find("total [J]"), std::string::npos);
+  EXPECT_NE(svg.find("time [s]"), std::string::npos);
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "nope", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("nope"), std::string::npos);
