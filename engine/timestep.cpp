@@ -157,4 +157,19 @@ double timestep_from_factor(double factor, double m_min, double kn) {
   return factor * std::sqrt(m_min / kn);
 }
 
+StepForecast forecast_step(LimitInputs in, double d_min, double d_max, double density, double explicit_dt,
+                           double dt_factor) {
+  const auto mass = [density](double d) { return density * M_PI * d * d * d / 6.0; };
+  in.r_min = 0.5 * d_min;
+  in.r_max = 0.5 * d_max;
+  in.m_min = mass(d_min);
+  in.m_max = mass(d_max);
+  const StabilityLimits lim = stability_limits(in);
+  StepForecast f;
+  f.dt = explicit_dt > 0.0 ? explicit_dt : timestep_from_factor(dt_factor, in.m_min, in.law.kn);
+  f.dt_critical = lim.governing().dt_critical;
+  f.mode = lim.governing().mode + " mode (" + lim.governing().contact + ")";
+  return f;
+}
+
 }  // namespace demcal::engine

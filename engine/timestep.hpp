@@ -46,4 +46,17 @@ void check_timestep(double dt, const StabilityLimits& limits);
 // dt = factor * sqrt(m_min / Kn) (seed Eq. 2.9).
 double timestep_from_factor(double factor, double m_min, double kn);
 
+// A scene's step and the limit of its isolated contacts, known before any grain
+// exists: from the extremes of the diameter range. The world's own check, with the
+// contacts it then has, can only be stricter. For job validation.
+struct StepForecast {
+  double dt = 0.0, dt_critical = 0.0;
+  std::string mode;  // the governing mode and contact
+  bool exceeds() const { return dt > dt_critical; }
+};
+// `in` carries the law and the walls; the masses come from d_min, d_max, density.
+// dt = explicit_dt if > 0, else dt_factor * sqrt(m_min / Kn).
+StepForecast forecast_step(LimitInputs in, double d_min, double d_max, double density, double explicit_dt,
+                           double dt_factor);
+
 }  // namespace demcal::engine

@@ -94,6 +94,33 @@ void read_settings(const nlohmann::json& j, Job& job) {
   }
 }
 
+// A step past the critical one is legal in a job (a stability study charts where a
+// method fails; the engine refuses the task with the mode named), but a user who
+// did not mean it should hear before the run.
+void note_unstable_steps(const SceneDef& scene, Job& job) {
+  if (!scene.forecast) return;
+  int shown = 0, more = 0;
+  for (const auto& t : job.tasks) {
+    const engine::StepForecast f = scene.forecast(t.params);
+    if (!f.exceeds()) continue;
+    if (shown == 5) {
+      ++more;
+      continue;
+    }
+    std::string where;
+    for (const auto& a : job.axes)
+      if (t.params.contains(a)) where += (where.empty() ? "" : ", ") + a + "=" + t.params[a].dump();
+    std::ostringstream os;
+    os.precision(4);
+    os << "task " << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt = " << f.dt
+       << " s exceeds the critical step " << f.dt_critical << " s of the " << f.mode
+       << "; the engine will refuse it";
+    job.notes.push_back(os.str());
+    ++shown;
+  }
+  if (more > 0) job.notes.push_back("and " + std::to_string(more) + " more task(s) past the critical step");
+}
+
 void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
   const ParamSet set = read_params(j, scene);
   for (const auto& a : set.axes) job.axes.push_back(a.name);
@@ -115,6 +142,7 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     t.params = std::move(params[i]);
     job.tasks.push_back(std::move(t));
   }
+  note_unstable_steps(scene, job);
 }
 
 }  // namespace

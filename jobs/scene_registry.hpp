@@ -6,6 +6,7 @@
 
 #include "engine/observer.hpp"
 #include "engine/scenes/scene_status.hpp"
+#include "engine/timestep.hpp"
 
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -35,6 +36,8 @@ struct SceneDef {
   std::function<SceneOutput(const nlohmann::json& params, const RunContext& ctx)> run;
   // The metrics a reader wants first: what a table shows unless asked for others.
   std::vector<std::string> headline;
+  // One task's time step against its isolated contacts' limit, before it runs.
+  std::function<engine::StepForecast(const nlohmann::json& params)> forecast;
 };
 
 const SceneDef* find_scene(const std::string& name);

@@ -30,6 +30,14 @@ double slope(const std::vector<double>& x, const std::vector<double>& y) {
 
 }  // namespace
 
+StepForecast CollisionConfig::step_forecast() const {
+  LimitInputs in;
+  in.law = contact_params(material);
+  if (!keep_friction) in.law.ks = 0.0;
+  in.has_walls = true;  // a smooth box
+  return forecast_step(in, material.d_min, material.d_max, material.density, dt, dt_factor);
+}
+
 void CollisionConfig::validate() const {
   material.validate();
   if (particles < 2) throw ConfigError("collision.particles", "must be at least 2");

@@ -5,6 +5,7 @@
 // integrator's error: the test that picks the time step.
 #include "../material.hpp"
 #include "../observer.hpp"
+#include "../timestep.hpp"
 #include "scene_status.hpp"
 
 #include <cstdint>
@@ -31,6 +32,7 @@ struct CollisionConfig {
   int threads = 1;
 
   void validate() const;  // throws ConfigError naming the field
+  StepForecast step_forecast() const;  // for job validation (timestep.hpp)
 };
 
 struct CollisionResult {

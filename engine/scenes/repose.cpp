@@ -106,6 +106,17 @@ bool parse_side_walls(const std::string& name, SideWalls& s) {
   return false;
 }
 
+StepForecast ReposeConfig::step_forecast() const {
+  Material scaled = material;
+  scaled.kn *= stiffness_scale;
+  scaled.ks *= stiffness_scale;
+  LimitInputs in;
+  in.law = contact_params(scaled);
+  in.has_walls = true;
+  in.wall_frictional = in.wall_rolling = side_walls == SideWalls::frictional;
+  return forecast_step(in, material.d_min, material.d_max, material.density, dt, dt_factor);
+}
+
 void ReposeConfig::validate() const {
   material.validate();
   positive(column_width, "repose.column_width");

@@ -22,6 +22,7 @@
 #include "../observer.hpp"
 #include "../particles.hpp"
 #include "../repose_profile.hpp"
+#include "../timestep.hpp"
 #include "scene_status.hpp"
 
 #include <cstdint>
@@ -102,6 +103,7 @@ struct ReposeConfig {
   int threads = 1;
 
   void validate() const;  // throws ConfigError naming the field
+  StepForecast step_forecast() const;  // for job validation (timestep.hpp)
 };
 
 struct ReposeResult {

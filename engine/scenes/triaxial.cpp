@@ -26,6 +26,13 @@ Material triaxial_seed_material() {
 
 const char* to_string(Packing p) { return p == Packing::dense ? "dense" : "loose"; }
 
+StepForecast TriaxialConfig::step_forecast() const {
+  LimitInputs in;
+  in.law = contact_params(material);  // the target law, the stiffest one the run uses
+  in.has_walls = true;                // six smooth walls
+  return forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
+}
+
 void TriaxialConfig::validate() const {
   material.validate();
   auto positive = [](double v, const char* f) {

@@ -30,6 +30,7 @@
 // mean of the two lateral stresses.
 #include "../material.hpp"
 #include "../observer.hpp"
+#include "../timestep.hpp"
 #include "scene_status.hpp"
 
 #include <cstdint>
@@ -99,6 +100,7 @@ struct TriaxialConfig {
   int threads = 1;
 
   void validate() const;  // throws ConfigError naming the field
+  StepForecast step_forecast() const;  // for job validation (timestep.hpp)
   double grain_density() const { return density_scale > 0.0 ? material.density * density_scale : scaled_density; }
 };
 

@@ -50,6 +50,22 @@ TEST(CollisionScene, BeyondTheCriticalStepIsRefusedUnlessAStudyAsksForIt) {
   EXPECT_FALSE(r.outcome.ok() && r.max_relative_error < 1e-2) << "an unstable step went unnoticed";
 }
 
+TEST(CollisionScene, TheForecastStepAndLimitAreTheRunsBeforeAnyGrainExists) {
+  CollisionConfig c = small();
+  c.dt_factor = 0.5;
+  const StepForecast f = c.step_forecast();
+  const CollisionResult r = run_collision(c);
+  // The run's smallest grain is a little larger than d_min: its step and limit a
+  // little longer, by the same factor sqrt(m_min / m(d_min)).
+  EXPECT_FALSE(f.exceeds());
+  EXPECT_GE(r.dt, f.dt);
+  EXPECT_NEAR(r.dt / f.dt, r.dt_critical / f.dt_critical, 1e-9);
+  EXPECT_LT(r.dt / f.dt, 1.05);
+  EXPECT_NE(f.mode.find("normal mode"), std::string::npos) << f.mode;
+  c.dt_factor = 2.0;
+  EXPECT_TRUE(c.step_forecast().exceeds()) << "the step the run refuses (test above) is forecast as refused";
+}
+
 TEST(CollisionScene, SweepRecommendsTheLargestStepWithinTolerance) {
   CollisionConfig c = small();
   c.steps = 10000;

@@ -75,6 +75,17 @@ TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
   EXPECT_EQ(parse(k).tasks[0].key, job.tasks[0].key);
 }
 
+TEST(Grid, AStepPastTheCriticalOneIsNotedBeforeTheRun) {
+  json j = base();
+  j["grid"] = {{"dt_factor", {0.1, 5.0}}};
+  const Job job = parse(j);
+  ASSERT_EQ(job.tasks.size(), 2u) << "legal: a stability study charts where the method fails";
+  ASSERT_EQ(job.notes.size(), 1u);
+  EXPECT_NE(job.notes[0].find("task 1 (dt_factor=5.0)"), std::string::npos) << job.notes[0];
+  EXPECT_NE(job.notes[0].find("exceeds the critical step"), std::string::npos) << job.notes[0];
+  EXPECT_NE(job.notes[0].find("normal mode"), std::string::npos) << job.notes[0];
+}
+
 TEST(Grid, KeyDependsOnSceneParamsAndIsStable) {
   const Job a = parse(base());
   const Job b = parse(base());
