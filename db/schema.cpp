@@ -1,5 +1,6 @@
 #include "schema.hpp"
 
+#include <filesystem>
 #include <fstream>
 #include <sys/stat.h>
 
@@ -82,6 +83,9 @@ void check_header(const std::string& path) {
 }  // namespace
 
 void check_file(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw DbError(path + " is a folder, not a database file (pass --db FOLDER/demcal.db)", true);
   if (file_is_empty_or_missing(path)) return;
   check_header(path);
   Connection c(path, /*read_only=*/true);

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <set>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -18,9 +19,37 @@ namespace {
 const char* const kTopKeys[] = {"name", "description", "scene", "material", "grid",
                                 "replicas", "seed", "threads", "fidelity", "snapshots"};
 
+// JSON lets a key appear twice in an object and the parser keeps the last one: a
+// job with "particles": 50 and, further down, "particles": 80 would run 80 without
+// a word. The parser's callback sees every key; the first repeat is an error.
+nlohmann::json parse_checking_duplicates(const std::string& text) {
+  std::vector<std::set<std::string>> keys;  // one set per open object
+  std::vector<std::string> path;            // the keys leading to the current value
+  std::string repeated, where;
+  auto cb = [&](int depth, nlohmann::json::parse_event_t ev, nlohmann::json& parsed) {
+    using E = nlohmann::json::parse_event_t;
+    if (ev == E::object_start) keys.emplace_back();
+    if (ev == E::object_end && !keys.empty()) keys.pop_back();
+    if (ev == E::key && !keys.empty()) {
+      const std::string k = parsed.get<std::string>();
+      path.resize(static_cast<std::size_t>(std::max(depth - 1, 0)));
+      if (!keys.back().insert(k).second && repeated.empty()) {
+        repeated = k;
+        for (const auto& p : path) where += p + ".";
+      }
+      path.push_back(k);
+    }
+    return true;
+  };
+  nlohmann::json j = nlohmann::json::parse(text, cb);
+  if (!repeated.empty())
+    throw JobError(where + repeated, "given twice in one object (JSON would keep only the last value)");
+  return j;
+}
+
 nlohmann::json parse_text(const std::string& text, const std::string& source) {
   try {
-    return nlohmann::json::parse(text);
+    return parse_checking_duplicates(text);
   } catch (const nlohmann::json::parse_error& e) {
     // nlohmann reports a byte offset; people want line and column.
     std::size_t line = 1, col = 1;

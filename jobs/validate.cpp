@@ -78,6 +78,9 @@ void read_object(const SceneDef& scene, const std::string& section, const std::s
       read_value(*spec, v, path, out);
     } else if (is_group(scene, section, key)) {
       read_object(scene, section, key, v, out);
+    } else if (const std::string other = section == "material" ? scene.name : "material";
+               prefix.empty() && (spec_at(scene, other, key) || is_group(scene, other, key))) {
+      throw JobError(path, "belongs in the \"" + other + "\" section");
     } else {
       throw JobError(path, unknown_key_reason(k, keys_in(scene, section, prefix.empty() ? "" : prefix + ".")));
     }

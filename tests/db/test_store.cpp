@@ -222,6 +222,13 @@ TEST(Store, ReadOnlyOpenDoesNotCreate) {
   EXPECT_FALSE(fs::exists(d.file("missing.db")));
 }
 
+TEST(Store, AFolderIsBadInputNamedAsAFolder) {
+  TempDir d;
+  fs::create_directory(d.file("runs.db"));
+  expect_bad_input([&] { Store s(d.file("runs.db")); }, "is a folder, not a database file");
+  expect_bad_input([&] { Store s(d.file("runs.db"), true); }, "is a folder");
+}
+
 TEST(Store, EmptyFileReadOnlyIsBadInputNotAMissingTable) {
   // A 0-byte file is a valid empty SQLite database: reading it must say that it
   // holds no results (bad input), not fail later on "no such table".

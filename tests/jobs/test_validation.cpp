@@ -90,6 +90,10 @@ const std::vector<Bad>& cases() {
       {"grid_scalar", [](json& j) { j["grid"]["eta"] = 0.1; }, "grid.eta"},
       {"grid_empty", [](json& j) { j["grid"]["eta"] = json::array(); }, "grid.eta"},
       {"grid_and_section_list", [](json& j) { j["material"]["eta"] = {0.1, 0.3}; }, "grid.eta"},
+      {"material_key_in_scene_section", [](json& j) { j["collision"]["theta_deg"] = 30; },
+       "collision.theta_deg: belongs in the \"material\" section"},
+      {"scene_key_in_material", [](json& j) { j["material"]["particles"] = 30; },
+       "material.particles: belongs in the \"collision\" section"},
       {"grid_bad_value", [](json& j) { j["grid"]["eta"] = {-1}; }, "grid.eta[0]"},
       {"replicas_zero", [](json& j) { j["replicas"] = 0; }, "replicas"},
       {"replicas_string", [](json& j) { j["replicas"] = "2"; }, "replicas"},
@@ -136,6 +140,15 @@ TEST(Validation, NonFiniteNumbersRejected) {
   EXPECT_NE(msg.find("1e999"), std::string::npos) << msg;
   EXPECT_NE(msg.find("finite"), std::string::npos) << msg;
   EXPECT_NE(error_of("{\"name\": \"x\", \"scene\": \"collision\", \"material\": {\"kn\": NaN}}"), "");
+}
+
+TEST(Validation, AKeyGivenTwiceInOneObjectIsAnError) {
+  std::string text = kBase;
+  text.replace(text.find("\"steps\": 100"), 12, "\"steps\": 100, \"particles\": 30");
+  const std::string msg = error_of(text);
+  EXPECT_NE(msg.find("collision.particles: given twice"), std::string::npos) << msg;
+  // The same key in two different objects is fine.
+  EXPECT_EQ(error_of(kBase), "");
 }
 
 TEST(Validation, NotAnObject) { EXPECT_NE(error_of("[1, 2]").find("JSON object"), std::string::npos); }
