@@ -69,7 +69,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
   cmd->add_option("--refine", a->refine, "rounds of DEM runs around the answer, refitting after each")->check(CLI::Range(0, 20));
-  cmd->add_option("--workers", a->workers, "worker processes for --refine (default: the core count)")->check(CLI::Range(0, 4096));
+  cmd->add_option("--workers", a->workers, "worker processes for --refine (default: the core count)")->check(CLI::Range(1, 4096));
   cmd->add_option("--out", a->out, "HDF5 output directory for --refine (default: demcal-out next to the database)");
   cmd->add_option("--format", a->format, "text or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
@@ -84,6 +84,8 @@ void add_fit(CLI::App& app, int& exit_code) {
       require_db(a->db);
       // Opened read-only first: a foreign, newer or empty file is reported before
       // the read-write open would give it a schema.
+      const std::string out_dir = a->out.empty() ? default_out_dir(a->db) : a->out;
+      if (a->refine > 0) require_writable_dir(a->out.empty() ? "--db" : "--out", out_dir);
       { db::Store probe(a->db, /*read_only=*/true); }
       db::Store store(a->db);
       calibrate::Calibration cal = calibrate::calibrate(store, req);
@@ -93,7 +95,7 @@ void add_fit(CLI::App& app, int& exit_code) {
         calibrate::RefineOptions ro;
         ro.rounds = a->refine;
         ro.log = &std::cerr;
-        ro.run_points = calibrate::dem_point_runner(a->out.empty() ? default_out_dir(a->db) : a->out, a->workers, &std::cerr);
+        ro.run_points = calibrate::dem_point_runner(out_dir, a->workers, &std::cerr);
         rounds = calibrate::refine(store, req, cal, ro);
         if (!rounds.empty()) id = rounds.back().fit_id;
       }
