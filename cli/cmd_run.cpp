@@ -33,7 +33,7 @@ int run(const RunArgs& a) {
   // Validate completely before the database is even opened: an invalid job
   // writes nothing anywhere.
   const jobs::Job job = jobs::load_job_file(a.job);
-  for (const auto& n : job.notes) std::cerr << "demcal: note: " << a.job << ": " << n << "\n";
+  print_notes(a.job, job.notes);
   if (a.db.empty()) throw jobs::JobError("--db", "empty path");
   jobs::RunOptions opt;
   opt.out_dir = a.out.empty() ? default_out_dir(a.db) : a.out;

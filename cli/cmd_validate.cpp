@@ -20,7 +20,7 @@ void add_validate(CLI::App& app, int& exit_code) {
                 << (axes.empty() ? std::string() : " over " + axes) << ", " << job.replicas << " replica(s)\n"
                 << "first task (key " << job.tasks.front().key << "):\n"
                 << job.tasks.front().params.dump(2) << "\n";
-      for (const auto& n : job.notes) std::cerr << "demcal: note: " << *file << ": " << n << "\n";
+      print_notes(*file, job.notes);
       return kOk;
     });
   });

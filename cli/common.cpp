@@ -56,4 +56,8 @@ void require_writable_file(const std::string& flag, const std::string& file) {
   if (std::filesystem::is_directory(file)) throw jobs::JobError(flag, file + " is a folder, not a file");
 }
 
+void print_notes(const std::string& job_file, const std::vector<std::string>& notes) {
+  for (const auto& n : notes) std::cerr << "demcal: note: " << job_file << ": " << n << "\n";
+}
+
 }  // namespace demcal::cli

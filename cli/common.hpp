@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace demcal::cli {
 
@@ -22,6 +23,8 @@ void require_db(const std::string& db_path);
 // writable folder, or when the file's folder does not exist or is not writable.
 void require_writable_dir(const std::string& flag, const std::string& dir);
 void require_writable_file(const std::string& flag, const std::string& file);
+// A job's notes (legal but easy to miss) on stderr, one line each.
+void print_notes(const std::string& job_file, const std::vector<std::string>& notes);
 
 void add_validate(CLI::App& app, int& exit_code);
 void add_run(CLI::App& app, int& exit_code);

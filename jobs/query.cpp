@@ -16,14 +16,18 @@ namespace {
 
 bool numbers_equal(double a, double b) { return a == b || std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)); }
 
+// The whole of `text` as a number, or false.
+bool parse_number(const std::string& text, double& d) {
+  char* end = nullptr;
+  d = std::strtod(text.c_str(), &end);
+  return end && *end == '\0' && end != text.c_str();
+}
+
 bool value_matches(const nlohmann::json& v, const std::string& want) {
   if (v.is_boolean()) return want == (v.get<bool>() ? "true" : "false");
   if (v.is_string()) return v.get<std::string>() == want;
-  if (v.is_number()) {
-    char* end = nullptr;
-    const double d = std::strtod(want.c_str(), &end);
-    return end && *end == '\0' && end != want.c_str() && numbers_equal(v.get<double>(), d);
-  }
+  double d = 0.0;
+  if (v.is_number()) return parse_number(want, d) && numbers_equal(v.get<double>(), d);
   return v.dump() == want;
 }
 
@@ -209,9 +213,8 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
     if (!r.params[w.key].is_number()) return;
     numeric = true;
   }
-  char* end = nullptr;
-  std::strtod(w.value.c_str(), &end);
-  if (numeric && (end == w.value.c_str() || *end != '\0'))
+  double d = 0.0;
+  if (numeric && !parse_number(w.value, d))
     throw JobError("--where", w.key + " is a number in every task; got \"" + w.value + "\"");
 }
 
