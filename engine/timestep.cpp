@@ -159,7 +159,7 @@ double timestep_from_factor(double factor, double m_min, double kn) {
 
 StepForecast forecast_step(LimitInputs in, double d_min, double d_max, double density, double explicit_dt,
                            double dt_factor) {
-  const auto mass = [density](double d) { return density * M_PI * d * d * d / 6.0; };
+  const auto mass = [density](double d) { return density * sphere_volume(0.5 * d); };
   in.r_min = 0.5 * d_min;
   in.r_max = 0.5 * d_max;
   in.m_min = mass(d_min);
