@@ -51,7 +51,8 @@ double timestep_from_factor(double factor, double m_min, double kn);
 // contacts it then has, can only be stricter. For job validation.
 struct StepForecast {
   double dt = 0.0, dt_critical = 0.0;
-  std::string mode;  // the governing mode and contact
+  std::string mode;    // the governing mode and contact
+  bool refused = true;  // false where the scene runs past the limit on purpose (a stability study)
   bool exceeds() const { return dt > dt_critical; }
 };
 // `in` carries the law and the walls; the masses come from d_min, d_max, density.

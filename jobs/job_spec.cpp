@@ -143,7 +143,8 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
     os.precision(4);
     os << "task " << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt = " << f.dt
        << " s exceeds the critical step " << f.dt_critical << " s of the " << f.mode
-       << "; the engine will refuse it";
+       << (f.refused ? "; the engine will refuse it"
+                     : "; allow_unstable_dt runs it anyway, and the instability detector judges it");
     job.notes.push_back(os.str());
     ++shown;
   }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The seed's calibration study end to end (issue 8): runs the job files in
 # examples/seed-study/, draws the Fig. 2.11 maps, fits the seed's targets and writes
-# docs/seed-study.md, every number beside the seed's.
+# docs/seed-study/README.md, every number beside the seed's.
 #
 #   [DEMCAL=bin] scripts/seed-study.sh [--db FILE] [--workers N] [--out DIR] [--skip-run] [--side-walls] [--damping]
 #

@@ -35,7 +35,9 @@ StepForecast CollisionConfig::step_forecast() const {
   in.law = contact_params(material);
   if (!keep_friction) in.law.ks = 0.0;
   in.has_walls = true;  // a smooth box
-  return forecast_step(in, material.d_min, material.d_max, material.density, dt, dt_factor);
+  StepForecast f = forecast_step(in, material.d_min, material.d_max, material.density, dt, dt_factor);
+  f.refused = !allow_unstable_dt;
+  return f;
 }
 
 void CollisionConfig::validate() const {

@@ -84,6 +84,14 @@ TEST(Grid, AStepPastTheCriticalOneIsNotedBeforeTheRun) {
   EXPECT_NE(job.notes[0].find("task 1 (dt_factor=5.0)"), std::string::npos) << job.notes[0];
   EXPECT_NE(job.notes[0].find("exceeds the critical step"), std::string::npos) << job.notes[0];
   EXPECT_NE(job.notes[0].find("normal mode"), std::string::npos) << job.notes[0];
+  EXPECT_NE(job.notes[0].find("will refuse it"), std::string::npos) << job.notes[0];
+
+  // A stability study that asks to run past the limit is told what happens instead.
+  j["collision"]["allow_unstable_dt"] = true;
+  const Job study = parse(j);
+  ASSERT_EQ(study.notes.size(), 1u);
+  EXPECT_EQ(study.notes[0].find("will refuse"), std::string::npos) << study.notes[0];
+  EXPECT_NE(study.notes[0].find("allow_unstable_dt runs it anyway"), std::string::npos) << study.notes[0];
 }
 
 TEST(Grid, KeyDependsOnSceneParamsAndIsStable) {
