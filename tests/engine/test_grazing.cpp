@@ -4,6 +4,7 @@
 // it, so after separation the energy may exceed the initial energy only by the
 // integrator's own error: that of the same impact head-on without friction at the
 // same step (the exit of the normal spring falls between steps; O(dt^3) here).
+#include <cmath>
 #include "engine/errors.hpp"
 #include "engine/scenes/grazing_impact.hpp"
 
@@ -98,6 +99,19 @@ TEST(GrazingImpact, FrictionTurnsTheReboundTowardsTheNormalAndSlidesAtGrazingAng
   EXPECT_LT(r.energy_ratio, 1.0);
   EXPECT_LT(r.rebound_deg, 75.0);
   EXPECT_GT(r.spin_final, 0.0);  // sliding along +x on a floor below spins it about +y
+  // Rigid-body impact (Walton) with e = 1: the grain slides throughout, so the
+  // tangential impulse is mu * 2 m v_n and tan(rebound) = tan(incidence) - 2 mu; the
+  // friction torque less the rolling moment (eta r Fn, plastic nearly at once) spins it
+  // to 5 (mu - eta) v_n / r. The tangential spring's compliance is the only difference.
+  const double mu = std::tan(c.material.friction_angle), eta = c.material.rolling_eta;
+  const double a = c.incidence_deg * M_PI / 180.0, vn = c.speed * std::cos(a), vt = c.speed * std::sin(a);
+  const double vt_after = vt - 2.0 * mu * vn, w_after = 5.0 * (mu - eta) * vn / c.radius;
+  EXPECT_NEAR(r.rebound_deg, std::atan(vt_after / vn) * 180.0 / M_PI, 0.1);
+  EXPECT_NEAR(r.spin_final, w_after, 0.02 * w_after);
+  const double ke_after = vn * vn + vt_after * vt_after + 0.4 * std::pow(w_after * c.radius, 2);
+  EXPECT_NEAR(r.energy_ratio, ke_after / (c.speed * c.speed), 0.01);
+  std::printf("[ report   ] 75 deg, tan theta = 0.577: rebound %.3f deg, energy ratio %.4f, spin %.4g rad/s\n",
+              r.rebound_deg, r.energy_ratio, r.spin_final);
 }
 
 TEST(GrazingImpact, BadConfigNamesTheField) {

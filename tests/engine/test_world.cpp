@@ -9,6 +9,7 @@
 #include "engine/world.hpp"
 #include "test_util.hpp"
 
+#include <set>
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
@@ -132,17 +133,19 @@ TEST(NeighbourSearch, FindsExactlyTheOverlapsBruteForceFinds) {
     o.max_overlap_fraction = 1.0;
     World w(p, {}, dom, law(3e7, 0.0), o);
     w.run(1);
-    long brute = 0;
+    std::set<std::pair<int, int>> brute;  // the same pairs, not only as many
     const Particles& q = w.particles();
     for (std::size_t i = 0; i < q.size(); ++i)
       for (std::size_t j = i + 1; j < q.size(); ++j) {
         Vec3 d = q.x[j] - q.x[i];
         dom.min_image(d);
-        brute += d.norm() < q.r[i] + q.r[j];
+        if (d.norm() < q.r[i] + q.r[j]) brute.insert({static_cast<int>(i), static_cast<int>(j)});
       }
-    long listed = 0;
-    w.for_each_contact([&](const ContactView& c) { listed += c.j >= 0; });
-    ASSERT_GT(brute, 50);
+    std::set<std::pair<int, int>> listed;
+    w.for_each_contact([&](const ContactView& c) {
+      if (c.j >= 0) EXPECT_TRUE(listed.insert({std::min(c.i, c.j), std::max(c.i, c.j)}).second) << "pair listed twice";
+    });
+    ASSERT_GT(brute.size(), 50u);
     EXPECT_EQ(listed, brute) << (periodic ? "periodic" : "open");
   }
 }
@@ -152,20 +155,27 @@ TEST(NeighbourSearch, ContactHistorySurvivesRebuilds) {
   // nearly every step, and with a generous one: identical trajectories.
   Vec3 hi;
   Particles p = cloud(200, 0.35, 3, 0.5, &hi);
+  for (auto& r : p.r) r *= 1.06;  // touching from the start: contacts that last and carry springs
   Domain dom;
   dom.hi = hi;
+  std::vector<double> springs;
   auto run = [&](double skin, long* builds) {
     WorldOptions o = options(safe_dt());
     o.skin = skin;
     World w(p, box_walls(Vec3::Zero(), hi), dom, law(3e7, 2.7e7, 30.0, 1.0, 0.2), o);
     w.run(3000);
     *builds = w.neighbors().builds();
+    springs.push_back(spring_total(w, false));
     return w.particles().x;
   };
   long b_thin = 0, b_thick = 0;
   const auto x_thin = run(1e-8, &b_thin);
   const auto x_thick = run(4e-4, &b_thick);
-  EXPECT_GT(b_thin, 100 * b_thick);
+  EXPECT_GE(b_thin, 3000) << "the thin skin must rebuild every step";
+  EXPECT_GT(b_thin, 20 * b_thick);
+  // The springs carried across rebuilds must exist for the comparison to mean anything.
+  ASSERT_GT(springs[1], 0.0) << "no tangential or rolling history at the end: nothing was carried";
+  EXPECT_NEAR(springs[0], springs[1], 1e-9 * springs[1]);
   double worst = 0;
   for (std::size_t i = 0; i < x_thin.size(); ++i) worst = std::max(worst, (x_thin[i] - x_thick[i]).norm());
   EXPECT_LT(worst, 1e-12);
@@ -246,6 +256,8 @@ TEST(Determinism, SameSeedAndThreadsGiveIdenticalRuns) {
   c.threads = 2;
   const CollisionResult a = run_collision(c), b = run_collision(c);
   EXPECT_EQ(a.energy_final, b.energy_final);
+  ASSERT_GT(a.energy.rows.size(), 3u);
+  EXPECT_TRUE(a.energy.rows == b.energy.rows) << "every sample of the series, not only the last";
   c.threads = 1;
   const CollisionResult one = run_collision(c);
   EXPECT_NEAR(one.energy_final / a.energy_final, 1.0, 1e-9);
@@ -389,11 +401,12 @@ TEST(CriticalStep, RefusesATooLargeStepNamingEachMode) {
   }
 }
 
-TEST(Instability, OversizedStepOnAnOverlappingPackIsStoppedNotNaN) {
-  // Grains inflated into heavy overlap, started with 3x the critical step.
+// Grains inflated into overlap, started with 3x the critical step: the run must be
+// stopped by the detector named, with every value still finite (stopped, not NaN).
+World inflated_pack(double inflate, double dt_over_critical, double overlap_limit) {
   Vec3 hi;
   Particles p = cloud(300, 0.35, 5, 0.0, &hi);
-  for (auto& r : p.r) r *= 1.2;
+  for (auto& r : p.r) r *= inflate;
   Domain dom;
   dom.hi = hi;
   const ContactParams cp = law(3e7, 2.7e7, 30.0, 1.0, 0.1);
@@ -401,20 +414,41 @@ TEST(Instability, OversizedStepOnAnOverlappingPackIsStoppedNotNaN) {
   in.law = cp;
   in.m_min = in.m_max = mass_of(0.6e-3);
   in.r_min = in.r_max = 0.6e-3;
-  WorldOptions o = options(3.0 * stability_limits(in).governing().dt_critical);
+  WorldOptions o = options(dt_over_critical * stability_limits(in).governing().dt_critical);
   o.allow_unstable_dt = true;
-  World w(std::move(p), box_walls(Vec3::Zero(), hi), dom, cp, o);
-  w.enable_energy_guard(0.05, 10);
+  o.max_overlap_fraction = overlap_limit;
+  return World(std::move(p), box_walls(Vec3::Zero(), hi), dom, cp, o);
+}
+
+void expect_stopped_by(double inflate, bool energy_guard, double overlap_limit, const std::string& quantity) {
+  World w = inflated_pack(inflate, 3.0, overlap_limit);
+  if (energy_guard) w.enable_energy_guard(0.05, 10);
   try {
     w.run(200000);
     FAIL() << "ran 200000 steps at 3x the critical step without being stopped";
   } catch (const InstabilityError& e) {
+    EXPECT_EQ(e.quantity(), quantity) << e.what();
     EXPECT_GT(e.step(), 0);
+    EXPECT_LT(e.step(), 5000) << "the detector should fire early, not after the blow-up is complete";
     EXPECT_GE(e.particle(), 0);
-    EXPECT_FALSE(e.quantity().empty());
-    EXPECT_NE(std::string(e.what()).find("step"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("step " + std::to_string(e.step())), std::string::npos) << e.what();
+    const Particles& q = w.particles();
+    for (std::size_t i = 0; i < q.size(); ++i)
+      ASSERT_TRUE(std::isfinite(q.x[i].sum()) && std::isfinite(q.v[i].sum()) && std::isfinite(q.w[i].sum()))
+          << "particle " << i << " went non-finite before the detector fired";
     std::printf("[ report   ] stopped: %s\n", e.what());
   }
+}
+
+TEST(Instability, OversizedStepOnAnOverlappingPackIsStoppedNotNaN) {
+  // The energy guard alone (no overlap limit): energy grows where none can.
+  expect_stopped_by(1.05, true, 1e9, "energy");
+  // The overlap limit alone (no energy guard).
+  expect_stopped_by(1.02, false, 0.25, "overlap");
+  // The same pack at a stable step stays within the overlap limit: the step tripped it.
+  World calm = inflated_pack(1.02, 0.3, 0.25);
+  calm.enable_energy_guard(0.05, 10);
+  EXPECT_NO_THROW(calm.run(2000));
 }
 
 TEST(Instability, StableRunWithTheGuardOnIsNotFlagged) {

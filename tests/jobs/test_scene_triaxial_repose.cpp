@@ -247,7 +247,7 @@ TEST_P(BadTriaxialReposeJob, RejectedNamingTheField) {
   GetParam().mutate(j);
   const std::string msg = error_of(j);
   ASSERT_FALSE(msg.empty()) << "accepted: " << j.dump();
-  EXPECT_NE(msg.find(GetParam().field), std::string::npos) << "message: " << msg;
+  EXPECT_EQ(msg.rfind(GetParam().field, 0), 0u) << "the message must begin with the field; message: " << msg;
 }
 
 INSTANTIATE_TEST_SUITE_P(TriaxialReposeScenes, BadTriaxialReposeJob, ::testing::ValuesIn(bad_cases()),

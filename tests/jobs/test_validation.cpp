@@ -52,7 +52,7 @@ const std::vector<Bad>& cases() {
       {"missing_name", [](json& j) { j.erase("name"); }, "name"},
       {"missing_scene", [](json& j) { j.erase("scene"); }, "scene"},
       {"unknown_scene", [](json& j) { j["scene"] = "sandpile"; }, "scene"},
-      {"section_of_another_scene", [](json& j) { j["scene"] = "triaxial"; }, "scene"},
+      {"section_of_another_scene", [](json& j) { j["scene"] = "triaxial"; }, "collision: section of scene \"collision\""},
       {"scene_not_string", [](json& j) { j["scene"] = 3; }, "scene"},
       {"name_not_string", [](json& j) { j["name"] = 3; }, "name"},
       {"name_with_slash", [](json& j) { j["name"] = "../evil"; }, "name"},
@@ -116,15 +116,15 @@ TEST_P(BadJob, RejectedNamingTheField) {
   GetParam().mutate(j);
   const std::string msg = error_of(j.dump());
   ASSERT_FALSE(msg.empty()) << "accepted: " << j.dump();
-  EXPECT_NE(msg.find(GetParam().field), std::string::npos) << "message: " << msg;
+  // The message begins with the field (JobError's "path: reason"), so a short name
+  // such as "seed" cannot be matched by the reason's text instead.
+  EXPECT_EQ(msg.rfind(GetParam().field, 0), 0u) << "message: " << msg;
 }
 
 INSTANTIATE_TEST_SUITE_P(Validation, BadJob, ::testing::ValuesIn(cases()),
                          [](const ::testing::TestParamInfo<Bad>& i) { return std::string(i.param.name); });
 
 TEST(Validation, BaseIsValid) { EXPECT_EQ(error_of(kBase), ""); }
-
-TEST(Validation, AtLeastThirtyDistinctCases) { EXPECT_GE(cases().size(), 30u); }
 
 TEST(Validation, MalformedJsonReportsLineAndColumn) {
   const std::string msg = error_of("{\n  \"name\": \"x\",\n  \"scene\" \"collision\"\n}");
