@@ -169,4 +169,22 @@ Front deposit_front(const SurfaceProfile& prof, int start, double min_height, in
   return f;
 }
 
+MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vector<double>& mass,
+                               const std::vector<std::uint8_t>& include, double share) {
+  std::vector<std::pair<double, std::size_t>> ke;
+  double total = 0.0;
+  for (std::size_t i = 0; i < velocity.size(); ++i)
+    if (include[i]) {
+      ke.push_back({0.5 * mass[i] * velocity[i].squaredNorm(), i});
+      total += ke.back().first;
+    }
+  MotionCarriers c;
+  c.grains = ke.size();
+  if (!(total > 0.0)) return c;
+  std::sort(ke.begin(), ke.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  c.fastest = static_cast<long>(ke.front().second);
+  for (double sum = 0.0; c.carriers < ke.size() && sum < share * total; ++c.carriers) sum += ke[c.carriers].first;
+  return c;
+}
+
 }  // namespace demcal::engine

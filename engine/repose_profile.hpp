@@ -65,4 +65,16 @@ Front deposit_front(const SurfaceProfile& prof, int start, double min_height, in
                     const std::vector<Vec3>* pos = nullptr, const std::vector<double>* radius = nullptr,
                     const std::vector<std::uint8_t>* include = nullptr);
 
+// How concentrated the motion is: the fewest of the included grains whose kinetic
+// energy (0.5 m v^2) makes up `share` of the total, and the fastest of them. A
+// deposit that will not come to rest because a handful of grains rattle is told
+// apart from one still flowing.
+struct MotionCarriers {
+  std::size_t carriers = 0;  // 0 when nothing moves
+  std::size_t grains = 0;    // included grains
+  long fastest = -1;         // index of the grain with the most kinetic energy
+};
+MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vector<double>& mass,
+                               const std::vector<std::uint8_t>& include, double share = 0.9);
+
 }  // namespace demcal::engine
