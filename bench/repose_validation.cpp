@@ -34,12 +34,31 @@ class Progress : public Observer {
 };
 }  // namespace
 
+const char* const kUsage =
+    "usage: bench_repose_validation [--seed N] [--threads N] [--scale S] [--theta DEG] [--eta E]\n"
+    "  [--width M] [--height M] [--depth D] [--time-limit S] [--dt-factor K] [--length M] [--rest R]\n"
+    "  [--drag D] [--prep-damping A] [--side-walls periodic|smooth|frictional] [--out PREFIX]\n";
+
 int main(int argc, char** argv) {
   ReposeConfig c;
   std::string out;
+  for (int i = 1; i < argc; ++i)
+    if (!std::strcmp(argv[i], "-h") || !std::strcmp(argv[i], "--help")) {
+      std::printf("%s", kUsage);
+      return 0;
+    }
+  if (argc % 2 == 0) {  // options come in pairs: a lone one would be dropped and the defaults run (minutes)
+    std::fprintf(stderr, "option %s has no value\n%s", argv[argc - 1], kUsage);
+    return 2;
+  }
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i];
-    const double v = std::atof(argv[i + 1]);
+    char* end = nullptr;
+    const double v = std::strtod(argv[i + 1], &end);
+    if (k != "--side-walls" && k != "--out" && (*argv[i + 1] == '\0' || *end != '\0')) {
+      std::fprintf(stderr, "%s %s: expected a number\n", k.c_str(), argv[i + 1]);
+      return 2;
+    }
     if (k == "--side-walls") {
       if (!parse_side_walls(argv[i + 1], c.side_walls)) {
         std::fprintf(stderr, "--side-walls: expected periodic, smooth or frictional, got %s\n", argv[i + 1]);
@@ -63,7 +82,7 @@ int main(int argc, char** argv) {
     else if (k == "--prep-damping") c.prep_damping = v;
     else if (k == "--out") out = argv[i + 1];
     else {
-      std::fprintf(stderr, "unknown option %s\n", k.c_str());
+      std::fprintf(stderr, "unknown option %s\n%s", k.c_str(), kUsage);
       return 2;
     }
   }

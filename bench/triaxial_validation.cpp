@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <set>
 #include <stdexcept>
 #include <string>
 
@@ -47,16 +48,50 @@ struct Printer : Observer {
 };
 }  // namespace
 
+const char* const kUsage =
+    "usage: bench_triaxial_validation [key=value ...]\n"
+    "  particles=2000 packing=dense|loose theta=30 eta=0.1 b=1 twist=0 p0=100e3 rate=1e-4 strain=0.30\n"
+    "  ramp lat_rate dt_factor=0.3 damping=0.3 shear_damping=0 pfactor unload ufr=0.01 stol=0.01 phi0=0.30\n"
+    "  prep_rate budget=400000 alpha=0.5 beta=0.02 seed=1 threads=1 csv=triaxial_series.csv quiet=0\n";
+
+const std::set<std::string> kKeys = {"particles", "packing", "theta",  "eta",       "twist",     "b",
+                                     "p0",        "rate",    "strain", "ramp",      "lat_rate",  "dt_factor",
+                                     "damping",   "shear_damping",    "pfactor",   "unload",    "ufr",
+                                     "stol",      "phi0",    "prep_rate", "budget", "alpha",     "beta",
+                                     "seed",      "threads", "csv",    "quiet"};
+
 int main(int argc, char** argv) {
   std::map<std::string, std::string> kv;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
+    if (a == "-h" || a == "--help" || a == "help") {
+      std::printf("%s", kUsage);
+      return 0;
+    }
     const auto eq = a.find('=');
     if (eq == std::string::npos) {
-      std::fprintf(stderr, "argument %s is not key=value\n", a.c_str());
+      std::fprintf(stderr, "argument %s is not key=value\n%s", a.c_str(), kUsage);
+      return 2;
+    }
+    // A misspelt key would otherwise run the defaults (minutes) without a word.
+    if (!kKeys.count(a.substr(0, eq))) {
+      std::fprintf(stderr, "unknown key %s\n%s", a.substr(0, eq).c_str(), kUsage);
       return 2;
     }
     kv[a.substr(0, eq)] = a.substr(eq + 1);
+  }
+  for (const auto& [k, v] : kv) {
+    if (k == "packing" || k == "csv") continue;
+    char* end = nullptr;
+    std::strtod(v.c_str(), &end);
+    if (v.empty() || *end != '\0') {
+      std::fprintf(stderr, "%s=%s: expected a number\n", k.c_str(), v.c_str());
+      return 2;
+    }
+  }
+  if (kv.count("packing") && kv["packing"] != "dense" && kv["packing"] != "loose") {
+    std::fprintf(stderr, "packing=%s: expected dense or loose\n", kv["packing"].c_str());
+    return 2;
   }
   auto num = [&](const char* k, double def) { return kv.count(k) ? std::atof(kv[k].c_str()) : def; };
   TriaxialConfig c;

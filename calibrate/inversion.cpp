@@ -22,6 +22,13 @@ std::string g(double v, int digits = 4) {
   return b;
 }
 
+// A fraction as a whole percentage: "100%", never "1e+02%".
+std::string percent(double fraction) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.0f%%", 100.0 * fraction);
+  return b;
+}
+
 bool parse_number(const std::string& s, double& out) {
   if (s.empty()) return false;
   char* end = nullptr;
@@ -290,7 +297,7 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                              g(R.at_eta_lo ? box.eta_lo : box.eta_hi) + "): the grid cuts it off; extend the grid there");
     if (std::max(ft, fe) > 0.3 && std::max(ft, fe) > 4 * std::min(ft, fe))
       res.warnings.push_back(std::string("the 95% region is elongated along ") + (ft > fe ? "theta" : "eta") + " (" +
-                             g(100 * ft, 2) + "% of the theta range, " + g(100 * fe, 2) + "% of the eta range): " +
+                             percent(ft) + " of the theta range, " + percent(fe) + " of the eta range): " +
                              (ft > fe ? "theta" : "eta") + " is poorly determined by these targets");
     // A target that barely changes across an axis near the answer cannot pin that axis.
     for (std::size_t k = 0; k < K; ++k) {

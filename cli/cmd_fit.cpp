@@ -108,7 +108,7 @@ void add_fit(CLI::App& app, int& exit_code) {
         print_fit(std::cout, cal, id);
         for (const auto& r : rounds)
           std::cout << "refine round " << r.round << ": " << r.points.size() << " run(s); candidate theta = " << g(r.theta)
-                    << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 2) << "% of the range (fit " << r.fit_id << ")\n";
+                    << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 3) << "% of the range (fit " << r.fit_id << ")\n";
       }
       if (!cal.result.ok) {
         std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";

@@ -28,6 +28,29 @@ void print_failures(db::Store& store, const db::StatusCounts& counts) {
   }
 }
 
+// Finished tasks whose metrics carry a warning (not quasi-static, a diagnostic on):
+// how many, and the first one's words.
+void print_warnings(db::Store& store, const db::StatusCounts& counts) {
+  for (const auto& [name, by] : counts) {
+    const auto it = by.find("done");
+    if (it == by.end() || it->second == 0) continue;
+    int n = 0;
+    std::string first;
+    std::int64_t first_id = 0;
+    for (const auto& t : store.tasks(name)) {
+      if (t.status != "done" || t.error.empty()) continue;
+      if (n++ == 0) {
+        first = t.error.substr(0, t.error.find('\n'));
+        first_id = t.id;
+      }
+    }
+    if (n == 0) continue;
+    if (first.size() > 200) first = first.substr(0, 197) + "...";
+    std::cout << name << ": " << n << " done task(s) with warnings, e.g. task " << first_id << ": " << first
+              << " (demcal query --job " << name << " shows each)\n";
+  }
+}
+
 }  // namespace
 
 void add_status(CLI::App& app, int& exit_code) {
@@ -63,6 +86,7 @@ void add_status(CLI::App& app, int& exit_code) {
         std::cout << std::setw(9) << total << "\n";
       }
       print_failures(store, counts);
+      print_warnings(store, counts);
       return kOk;
     });
   });

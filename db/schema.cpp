@@ -32,7 +32,7 @@ CREATE TABLE tasks(
   started_at REAL,
   finished_at REAL,
   wall_s REAL,
-  error TEXT);
+  error TEXT);  -- failed: why; done: its warnings ("warning: ...") or NULL
 CREATE INDEX tasks_status ON tasks(status);
 CREATE TABLE job_tasks(
   job_id INTEGER NOT NULL REFERENCES jobs(id),

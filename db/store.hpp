@@ -30,13 +30,13 @@ struct TaskRow {
   std::string worker;
   std::int64_t pid = 0;
   double started_at = 0, finished_at = 0, wall_s = 0;  // NaN when unset
-  std::string error;
+  std::string error;  // why a failed task failed; a done task's warnings ("warning: ..."), if any
 };
 
 struct Outcome {
   std::string status;  // "done" or "failed"
   double wall_s = 0;
-  std::string error;
+  std::string error;  // failed: why; done: its warnings, or empty
   std::vector<std::pair<std::string, double>> metrics;
   std::vector<std::pair<std::string, std::string>> artifacts;  // kind, path
 };

@@ -143,10 +143,10 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   // A metric named like a parameter (the collision scene's `steps`) gets its own
   // header, "metric.NAME": CSV readers key columns by header.
   for (const auto& m : mets) {
-    const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() || m == "error";
+    const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() || m == "error/warning";
     t.header.push_back(taken ? "metric." + m : m);
   }
-  t.header.push_back("error");
+  t.header.push_back("error/warning");
   for (const auto& r : rows) {
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
     for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
@@ -193,7 +193,7 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
                         {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
                         {"key", r.task.key},         {"params", r.params},    {"metrics", m},
                         {"wall_s", json_number(r.task.wall_s)}};
-    if (!r.task.error.empty()) o["error"] = r.task.error;
+    if (!r.task.error.empty()) o[r.task.status == "done" ? "warning" : "error"] = r.task.error;
     arr.push_back(std::move(o));
   }
   out << arr.dump(2) << "\n";

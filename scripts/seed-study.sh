@@ -14,7 +14,8 @@
 #
 # Resumable: tasks already in the database are not run again, so an interrupted
 # study continues where it stopped. The seed's values below are transcribed from
-# ../shared/reference/seed-tables.json (Tables 2.2, 2.3, Fig. 2.15).
+# the seed chapter's Tables 2.2, 2.3 and Fig. 2.15 (the project's seed-tables.json,
+# which is not part of this repository).
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 DB="$ROOT/seed-study.db"

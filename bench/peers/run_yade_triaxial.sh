@@ -5,7 +5,7 @@
 #
 # Defaults: build, 2000 grains, eta 0.1, 3e-4 /s (theta 30 deg, p0 100 kPa, dense).
 # Needs the Debian package yade (2023.02a on Debian 12). Runs both codes side by
-# side, one core each (YADE at 2,000 grains takes ~45 min; demcal ~2-6 min), and
+# side, one core each (YADE at 2,000 grains took 61-65 min here; demcal ~2-6 min), and
 # prints both summaries. Parameter mapping and caveats: bench/peers/yade_triaxial.py.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)

@@ -203,7 +203,7 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 
 SceneDef scene_triaxial() {
   return SceneDef{kSection, triaxial_params(), resolve, run,
-                  /*headline=*/{"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_initial", "eps_v_final",
+                  /*headline=*/{"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_interior_initial", "eps_v_final",
                                 "max_inertial_number", "particles", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); }};
 }

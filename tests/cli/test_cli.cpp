@@ -7,7 +7,8 @@ using nlohmann::json;
 
 TEST(Cli, HelpOnEverySubcommand) {
   TempDir d;
-  for (const char* cmd : {"validate", "run", "status", "query", "plot"}) {
+  for (const char* cmd : {"validate", "run", "status", "query", "plot", "map", "envelope", "fit", "merge", "slurm",
+                          "study"}) {
     const Result r = run_demcal({cmd, "--help"}, d.path.string());
     EXPECT_EQ(r.rc, 0) << cmd;
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << cmd << r.out;

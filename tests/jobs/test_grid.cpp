@@ -1,9 +1,11 @@
 #include "jobs/job_spec.hpp"
+#include "jobs/material_params.hpp"
 #include "jobs/physics_version.hpp"
 #include "jobs/task_key.hpp"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <set>
 
@@ -124,6 +126,10 @@ TEST(Grid, DegreesBecomeRadiansOnlyInside) {
   j["material"]["theta_deg"] = 30;
   const Job job = parse(j);
   EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 30.0);
+  // ... and the engine gets radians: tan(30 deg) in the Coulomb cap.
+  const demcal::engine::Material m = demcal::jobs::material_from(job.tasks[0].params);
+  EXPECT_NEAR(m.friction_angle, M_PI / 6.0, 1e-15);
+  EXPECT_NEAR(demcal::engine::contact_params(m).tan_theta, 1.0 / std::sqrt(3.0), 1e-15);
 }
 
 TEST(Grid, EveryExampleValidates) {

@@ -290,7 +290,7 @@ struct TempDir {
 
 // Runs a one-task job with one worker and one engine thread; returns the task's
 // metrics by name, after checking it finished.
-std::map<std::string, double> run_one(const json& j, double& wall_s) {
+std::map<std::string, double> run_one(const json& j, double& wall_s, std::string* stored_message = nullptr) {
   TempDir d;
   const Job job = parse(j);
   EXPECT_EQ(job.tasks.size(), 1u);
@@ -310,6 +310,7 @@ std::map<std::string, double> run_one(const json& j, double& wall_s) {
   std::map<std::string, double> m;
   if (rows.empty()) return m;
   EXPECT_EQ(rows[0].status, "done") << rows[0].error;
+  if (stored_message) *stored_message = rows[0].error;
   for (const auto& [k, v] : store.metrics(rows[0].id)) m[k] = v;
   const auto art = store.artifacts(rows[0].id);
   EXPECT_EQ(art.size(), 1u);
@@ -336,7 +337,14 @@ TEST(TriaxialReposeScenes, QuickTriaxialTaskRunsThroughTheRunner) {
   j["fidelity"] = "quick";
   j["threads"] = 1;
   double wall = 0;
-  const auto m = run_one(j, wall);
+  std::string warning;
+  const auto m = run_one(j, wall, &warning);
+  // A finished task keeps its warnings: the quasi-static one is there exactly when
+  // the stored largest inertial number exceeds the limit (1e-3).
+  ASSERT_TRUE(m.count("max_inertial_number"));
+  EXPECT_EQ(warning.rfind("warning: not quasi-static: largest inertial number", 0) == 0,
+            m.at("max_inertial_number") > 1e-3)
+      << "max I " << m.at("max_inertial_number") << ", stored: " << warning;
   std::printf("[ report   ] quick triaxial task: %.1f s wall (engine %.1f s), phi_peak %.2f, phi_cv %.2f, "
               "eps_v_final %.4f, max I %.2e\n",
               wall, m.count("wall_s") ? m.at("wall_s") : -1.0, m.count("phi_peak_deg") ? m.at("phi_peak_deg") : -1.0,

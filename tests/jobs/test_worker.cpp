@@ -1,0 +1,47 @@
+// The worker's result file, read back by the runner: what a task process leaves
+// behind is all the parent learns of it.
+#include "jobs/worker.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using demcal::jobs::parse_worker_result;
+
+TEST(WorkerResult, NonFiniteMetricsSurviveTheJsonTrip) {
+  const auto o = parse_worker_result(R"({"status": "done", "wall_s": 1.5,
+      "metrics": [["drift", "inf"], ["neg", "-inf"], ["undefined", "nan"], ["phi", 31.25]],
+      "artifacts": [["hdf5", "out/1.h5"]]})");
+  ASSERT_TRUE(o);
+  EXPECT_EQ(o->status, "done");
+  EXPECT_EQ(o->wall_s, 1.5);
+  ASSERT_EQ(o->metrics.size(), 4u);
+  EXPECT_TRUE(std::isinf(o->metrics[0].second) && o->metrics[0].second > 0);
+  EXPECT_TRUE(std::isinf(o->metrics[1].second) && o->metrics[1].second < 0);
+  EXPECT_TRUE(std::isnan(o->metrics[2].second));
+  EXPECT_EQ(o->metrics[3].second, 31.25);
+  ASSERT_EQ(o->artifacts.size(), 1u);
+  EXPECT_EQ(o->artifacts[0].second, "out/1.h5");
+  EXPECT_TRUE(o->error.empty()) << "a clean finish carries no message";
+}
+
+TEST(WorkerResult, FinishedTaskKeepsItsWarningsAndFailedTaskItsReason) {
+  const auto done = parse_worker_result(R"({"status": "done", "wall_s": 2, "metrics": [], "artifacts": [],
+      "warnings": "not quasi-static: largest inertial number 0.0039 exceeds 0.001"})");
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->error, "warning: not quasi-static: largest inertial number 0.0039 exceeds 0.001");
+  const auto failed = parse_worker_result(R"({"status": "failed", "wall_s": 2, "metrics": [], "artifacts": [],
+      "error": "not_settled in stage collapse: ..."})");
+  ASSERT_TRUE(failed);
+  EXPECT_EQ(failed->status, "failed");
+  EXPECT_EQ(failed->error, "not_settled in stage collapse: ...");
+}
+
+TEST(WorkerResult, TruncatedOrIncompleteFileIsNoResult) {
+  // A worker killed mid-write, or a file of another shape: the runner must treat
+  // the task as failed without a result, not read half a record.
+  EXPECT_FALSE(parse_worker_result(R"({"status": "done", "wall_s": 1.5, "metrics": [["phi", 3)"));
+  EXPECT_FALSE(parse_worker_result(R"({"status": "done", "metrics": [], "artifacts": []})"));  // no wall_s
+  EXPECT_FALSE(parse_worker_result(""));
+  EXPECT_FALSE(parse_worker_result(R"({"status": "done", "wall_s": 1, "metrics": [[1, 2]], "artifacts": []})"));
+}
