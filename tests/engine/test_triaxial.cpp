@@ -271,6 +271,53 @@ TEST(TriaxialScene, SeriesHasTheDocumentedColumnsAndSampling) {
     EXPECT_TRUE(has(k)) << k;
 }
 
+TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
+  // Recomputed here from the stored series, independently of the scene's code:
+  // sin(phi_mob) = (s1 - s3) / (s1 + s3) with s3 the mean of the two lateral walls;
+  // phi_peak at its largest, phi_cv from the mean sine over the window [0.10, 0.15].
+  const TriaxialResult& r = cached("dense");
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  const double deg = 180.0 / M_PI;
+  double best = -2.0, eps_at_best = NAN, q_at_best = NAN, sum = 0.0, sum_in = 0.0;
+  int n = 0;
+  for (std::size_t i = 0; i < r.series.rows.size(); ++i) {
+    const double s1 = col(r, i, "sigma1"), s3 = 0.5 * (col(r, i, "sigma2") + col(r, i, "sigma3"));
+    const double x = (s1 - s3) / (s1 + s3);
+    if (x > best) {
+      best = x;
+      eps_at_best = col(r, i, "eps1");
+      q_at_best = col(r, i, "q");
+    }
+    const double e1 = col(r, i, "eps1");
+    if (e1 >= 0.10 - 1e-9 && e1 <= 0.15 + 1e-9) {
+      sum += x;
+      const double a = col(r, i, "lw_zz"), b = 0.5 * (col(r, i, "lw_xx") + col(r, i, "lw_yy"));
+      sum_in += (a - b) / (a + b);
+      ++n;
+    }
+  }
+  ASSERT_GT(n, 5);
+  EXPECT_NEAR(r.phi_peak_deg, std::asin(best) * deg, 1e-10);
+  EXPECT_EQ(r.eps1_at_peak, eps_at_best);
+  EXPECT_EQ(r.q_peak, q_at_best);
+  EXPECT_NEAR(r.phi_cv_deg, std::asin(sum / n) * deg, 1e-10);
+  EXPECT_NEAR(r.phi_cv_interior_deg, std::asin(sum_in / n) * deg, 1e-10);
+  EXPECT_EQ(r.cv_samples, n);
+  EXPECT_EQ(r.eps_v_final, col(r, r.series.rows.size() - 1, "eps_v"));
+  EXPECT_EQ(r.porosity_final, col(r, r.series.rows.size() - 1, "porosity"));
+  // The standard error is of block means: positive, and below the rows' own spread.
+  EXPECT_GT(r.phi_cv_se_deg, 0.0);
+  double var = 0.0;
+  for (std::size_t i = 0; i < r.series.rows.size(); ++i) {
+    const double e1 = col(r, i, "eps1");
+    if (e1 < 0.10 - 1e-9 || e1 > 0.15 + 1e-9) continue;
+    const double s1 = col(r, i, "sigma1"), s3 = 0.5 * (col(r, i, "sigma2") + col(r, i, "sigma3"));
+    const double phi = std::asin((s1 - s3) / (s1 + s3)) * deg;
+    var += (phi - r.phi_cv_deg) * (phi - r.phi_cv_deg) / (n - 1);
+  }
+  EXPECT_LT(r.phi_cv_se_deg, std::sqrt(var));
+}
+
 TEST(TriaxialScene, QuasiStaticWarningAboveTheInertialLimit) {
   const TriaxialResult& r = cached("dense");  // I = 2.3e-3 at 3e-4 /s
   ASSERT_TRUE(r.outcome.ok());
