@@ -119,6 +119,54 @@ TEST(Conservation, NewtonsThirdLawPerContact) {
   EXPECT_LT(moment.norm(), 1e-12 * q.f[0].norm() * 1e-3);
 }
 
+TEST(Conservation, WorkOfAMovingWallIsTheEnergyItGives) {
+  // A frictionless wall driven at constant speed into a grain at rest, no gravity:
+  // all the wall's work goes into the grain's kinetic energy and the contact spring.
+  // Returns the worst mismatch over the push, relative to the work done.
+  auto mismatch = [](double dt_factor) {
+    Particles p;
+    p.add(Vec3(0.0, 0.0, 1.0e-3), 1.0e-3, kDensity);  // touching the floor z = 0
+    std::vector<Wall> walls = {plane("floor", Vec3::Zero(), Vec3(0, 0, 1))};
+    walls[0].velocity = Vec3(0.0, 0.0, 0.05);
+    World w(std::move(p), walls, open_domain(), law(3e7, 0.0), options(safe_dt(dt_factor)));
+    const long steps = std::lround(1000 * 0.1 / dt_factor);  // the same 21 µs of push and flight
+    double worst = 0.0, largest = 0.0;
+    for (long k = 0; k < steps; ++k) {
+      w.run(1);
+      const Energies e = energies(w);
+      worst = std::max(worst, std::abs(w.wall_work() - (e.kinetic() + e.elastic())));
+      largest = std::max(largest, w.wall_work());
+    }
+    EXPECT_GT(largest, 0.0) << "the wall must have pushed";
+    EXPECT_GT(w.particles().v[0].z(), 0.05) << "and launched the grain (it leaves faster than the wall)";
+    return worst / largest;
+  };
+  const double coarse = mismatch(0.1), fine = mismatch(0.05);
+  std::printf("[ report   ] wall work against kinetic + elastic energy: worst mismatch %.3g (dt 0.1), %.3g (dt 0.05)\n",
+              coarse, fine);
+  EXPECT_LT(coarse, 3e-4);
+  // The trapezoid rule on the wall's power and velocity Verlet are second order in dt.
+  EXPECT_LT(fine, 0.35 * coarse);
+}
+
+TEST(Conservation, LocalDampingScalesAFallingGrainsAccelerationBy1MinusAlpha) {
+  // Cundall's local damping opposes each force component along the velocity:
+  // a grain falling freely from rest accelerates at g (1 - alpha), exactly.
+  for (double alpha : {0.0, 0.3, 0.7}) {
+    Particles p;
+    p.add(Vec3(0.0, 0.0, 0.0), 1.0e-3, kDensity);
+    WorldOptions o = options(safe_dt());
+    o.gravity = Vec3(0.0, 0.0, -9.81);
+    o.local_damping = alpha;
+    World w(std::move(p), {}, open_domain(), law(3e7, 0.0), o);
+    w.run(10);
+    const double v0 = w.particles().v[0].z();
+    w.run(100);
+    const double a = (w.particles().v[0].z() - v0) / (100 * safe_dt());
+    EXPECT_NEAR(a, -9.81 * (1.0 - alpha), 1e-6 * 9.81) << "alpha " << alpha;
+  }
+}
+
 TEST(Conservation, ContactAcrossThePeriodicSeamActsAsInTheMiddle) {
   // The same oblique, sliding, rolling pair twice: straddling the periodic seam in x,
   // and unwrapped in the middle of the box. The seam must change nothing: the same
