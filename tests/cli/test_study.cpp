@@ -31,6 +31,47 @@ TEST(CliStudy, TimestepQuickWritesChartsRecommendationAndStoresTasks) {
   EXPECT_EQ(slurp(d.file("charts/timestep_recommendation.txt")), first_recommendation);
 }
 
+TEST(CliStudy, TimestepRecommendationFollowsItsRule) {
+  // The rule, re-applied to the study's own CSV: the largest factor such that at it
+  // and at every smaller factor the frictionless run is stable with |drift| within
+  // the tolerance and the run with friction and rolling is stable and gains no
+  // more than the tolerance. A tolerance loose enough that more than one factor
+  // passes ("largest" is exercised) and tight enough that some fail (the stop is).
+  TempDir d;
+  const double tol = 2.0;
+  const Result r = run_demcal({"study", "timestep", "--quick", "--workers", "2", "--db", "s.db", "--out", "c",
+                               "--tolerance", "2"},
+                              d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  std::map<double, bool> frictionless_pass, friction_pass;
+  std::istringstream csv(slurp(d.file("c/timestep.csv")));
+  std::string line;
+  std::getline(csv, line);  // header
+  while (std::getline(csv, line)) {
+    std::vector<std::string> f;
+    std::stringstream ls(line);
+    for (std::string cell; f.size() < 6 && std::getline(ls, cell, ',');) f.push_back(cell);
+    ASSERT_EQ(f.size(), 6u) << line;
+    const double factor = std::stod(f[1]), drift = std::stod(f[5]);
+    if (f[0] == "frictionless") frictionless_pass[factor] = f[3] == "ok" && std::abs(drift) <= tol;
+    else friction_pass[factor] = f[3] == "ok" && drift <= tol;
+  }
+  ASSERT_GE(frictionless_pass.size(), 3u);
+  double expected = 0.0;
+  for (const auto& [factor, ok] : frictionless_pass) {
+    if (!ok || !friction_pass.count(factor) || !friction_pass[factor]) break;
+    expected = factor;
+  }
+  EXPECT_GT(expected, frictionless_pass.begin()->first) << "at least two factors should pass at this tolerance";
+  const auto at = r.out.find("recommended dt_factor ");
+  ASSERT_NE(at, std::string::npos) << r.out;
+  EXPECT_NEAR(std::stod(r.out.substr(at + 22)), expected, 1e-6 * expected) << r.out;
+  // Some factor fails at this tolerance, or the rule's "stop at the first failure" is untested.
+  bool any_fail = false;
+  for (const auto& [factor, ok] : frictionless_pass) any_fail |= !ok || !friction_pass[factor];
+  EXPECT_TRUE(any_fail);
+}
+
 TEST(CliStudy, GrazingQuickChartsTheEnergyRatio) {
   TempDir d;
   const Result r = run_demcal({"study", "grazing", "--quick", "--out", "g"}, d.path.string());
