@@ -163,7 +163,7 @@ TEST(Incline, SlidesAboveTheFrictionAngle) {
   EXPECT_GT(run.slip_velocity, 0.5 * expected * 0.04);
 }
 
-TEST(Incline, RollsRatherThanSlidesWhenRollingIsFree) {
+TEST(Incline, RollsRatherThanSlidesAboveTheFrictionAngleWhenFrictionSuffices) {
   // Above the friction angle a sphere free to roll need not slide: with eta = 0.1
   // at 40 deg the friction it needs, (0.4 a + eta g cos a) / (g cos a) = 0.31, is
   // below tan(30 deg).

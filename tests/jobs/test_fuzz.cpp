@@ -96,7 +96,6 @@ TEST(Fuzz, MutatedExamplesValidateOrFailCleanly) {
       ADD_FAILURE() << "unexpected " << e.what() << " for: " << text;
     }
   }
-  EXPECT_EQ(ok + rejected, n);
   EXPECT_GT(rejected, n / 4);
   EXPECT_GT(ok, 10);
 }
