@@ -23,6 +23,11 @@ TEST(Envelope, MohrCoulombRecoversKnownFrictionAngleAndCohesion) {
   std::printf("phi %.3f +- %.3f deg, c %.3f +- %.3f kPa; phi (c = 0) %.3f\n", e.phi_deg, e.phi_se, e.c, e.c_se, e.phi0_deg);
   EXPECT_GT(e.phi_se, 0);
   EXPECT_GT(e.c_se, 0);
+  // The regression's own errors for 2 kPa noise over these pressures (Sxx = 215,625 kPa^2,
+  // n = 12): se(N) = 0.0043, so phi_se ~ 0.027 deg and c_se ~ 0.26 kPa; an
+  // over-estimate would widen the checks below into meaninglessness.
+  EXPECT_LT(e.phi_se, 0.06);
+  EXPECT_LT(e.c_se, 0.6);
   EXPECT_NEAR(e.phi_deg, phi, std::max(3 * e.phi_se, 0.05));
   EXPECT_NEAR(e.c, c, std::max(3 * e.c_se, 0.5));
   EXPECT_EQ(e.pressures, 4);
