@@ -225,8 +225,8 @@ TEST(TriaxialScene, LooseContracts) {
 TEST(TriaxialScene, FrictionlessSampleDoesNotDilateAtCriticalState) {
   const TriaxialResult& r = cached("frictionless");
   ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
-  // Mean eps_v over the critical-state window is compressive; the dense
-  // frictional sample dilates by ~0.1 over the same strain.
+  // Mean eps_v over the critical-state window; the dense frictional sample dilates
+  // by ~0.1 over the same strain.
   const std::size_t c1 = r.series.column("eps1"), cv = r.series.column("eps_v");
   double sum = 0.0;
   int n = 0;
@@ -239,8 +239,15 @@ TEST(TriaxialScene, FrictionlessSampleDoesNotDilateAtCriticalState) {
   const double ev = sum / n;
   std::printf("[ report   ] frictionless: mean eps_v over eps1 >= 0.05: %.5f (dense frictional: %.4f)\n", ev,
               cached("dense").eps_v_final);
-  EXPECT_GT(ev, 0.0);
-  EXPECT_GT(r.eps_v_final, 0.0);
+  // Frictionless spheres compressed at p0 are already near random close packing, so
+  // shearing them changes the volume by round-off-sized amounts of either sign: +0.0024
+  // (mean) with the AVX2 build, -0.00005 with the SSE2 one (DEMCAL_NATIVE=OFF). The
+  // claim that holds on every build: no dilation beyond a tenth of the dense frictional
+  // sample's.
+  const double dilation = -cached("dense").eps_v_final;
+  ASSERT_GT(dilation, 0.05);
+  EXPECT_GT(ev, -0.1 * dilation);
+  EXPECT_GT(r.eps_v_final, -0.1 * dilation);
   EXPECT_LT(r.phi_cv_deg, 15.0);
 }
 
