@@ -3,31 +3,21 @@
 #include "db/merge.hpp"
 #include "db/store.hpp"
 
+#include "temp_dir.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <unistd.h>
 
-namespace fs = std::filesystem;
+using demcal::test::TempDir;
 using demcal::db::MergeReport;
 using demcal::db::NewTask;
 using demcal::db::Outcome;
 using demcal::db::Store;
 
 namespace {
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() / ("demcal-merge-test-" + std::to_string(getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  std::string file(const std::string& n) const { return (path / n).string(); }
-};
 
 // One job "j" of three tasks a, b, c; each given a state: "pending", "running",
 // "done" (metric x = value) or "failed".

@@ -1,6 +1,8 @@
 #include "db/schema.hpp"
 #include "db/store.hpp"
 
+#include "temp_dir.hpp"
+
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
@@ -11,22 +13,11 @@
 #include <unistd.h>
 
 namespace fs = std::filesystem;
+using demcal::test::TempDir;
 using demcal::db::DbError;
 using demcal::db::Store;
 
 namespace {
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() / ("demcal-db-test-" + std::to_string(getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  std::string file(const std::string& n) const { return (path / n).string(); }
-};
 
 std::string slurp(const std::string& p) {
   std::ifstream f(p, std::ios::binary);
