@@ -10,7 +10,12 @@ namespace {
 
 // Why tasks failed, a few per job (their first line): the counts alone send the
 // user to `query` for the reason.
-void print_failures(db::Store& store, const db::StatusCounts& counts) {
+// The query command that shows a job's tasks, naming the database unless it is the default.
+std::string query_hint(const std::string& db, const std::string& job) {
+  return "demcal query" + (db == "demcal.db" ? std::string() : " --db " + db) + " --job " + job;
+}
+
+void print_failures(db::Store& store, const db::StatusCounts& counts, const std::string& db) {
   constexpr int kShown = 3;
   for (const auto& [name, by] : counts) {
     const auto it = by.find("failed");
@@ -24,13 +29,13 @@ void print_failures(db::Store& store, const db::StatusCounts& counts) {
       if (++shown == kShown) break;
     }
     if (it->second > kShown)
-      std::cout << name << ": " << it->second - kShown << " more failed (demcal query --job " << name << ")\n";
+      std::cout << name << ": " << it->second - kShown << " more failed (" << query_hint(db, name) << ")\n";
   }
 }
 
 // Finished tasks whose metrics carry a warning (not quasi-static, a diagnostic on):
 // how many, and the first one's words.
-void print_warnings(db::Store& store, const db::StatusCounts& counts) {
+void print_warnings(db::Store& store, const db::StatusCounts& counts, const std::string& db) {
   for (const auto& [name, by] : counts) {
     const auto it = by.find("done");
     if (it == by.end() || it->second == 0) continue;
@@ -47,14 +52,14 @@ void print_warnings(db::Store& store, const db::StatusCounts& counts) {
     if (n == 0) continue;
     if (first.size() > 200) first = first.substr(0, 197) + "...";
     std::cout << name << ": " << n << " done task(s) with warnings, e.g. task " << first_id << ": " << first
-              << " (demcal query --job " << name << " shows each)\n";
+              << " (" << query_hint(db, name) << " shows each)\n";
   }
 }
 
 }  // namespace
 
 void add_status(CLI::App& app, int& exit_code) {
-  auto* cmd = app.add_subcommand("status", "Task counts per status, per job, and the reason of up to three failed tasks per job");
+  auto* cmd = app.add_subcommand("status", "Task counts per status, per job, the reason of up to three failed tasks per job, and how many finished tasks carry warnings");
   auto db = std::make_shared<std::string>("demcal.db");
   auto job = std::make_shared<std::string>();
   cmd->add_option("--db", *db, "SQLite database")->capture_default_str();
@@ -85,8 +90,8 @@ void add_status(CLI::App& app, int& exit_code) {
         }
         std::cout << std::setw(9) << total << "\n";
       }
-      print_failures(store, counts);
-      print_warnings(store, counts);
+      print_failures(store, counts, *db);
+      print_warnings(store, counts, *db);
       return kOk;
     });
   });

@@ -222,7 +222,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
       ++live.failed;
     }
     ++ran;
-    progress.line(describe_task(job, static_cast<std::size_t>(k.task->index)) + " failed: " + why, live);
+    progress.line(describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + " failed: " + why, live);
     k.task.reset();
   };
   auto stop_rank = [&](int r) {
@@ -278,7 +278,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
           }
           ++ran;
           std::ostringstream msg;
-          msg << describe_task(job, static_cast<std::size_t>(k.task->index)) << " " << out->status << " in "
+          msg << describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) << " " << out->status << " in "
               << format_duration(out->wall_s) << " on rank " << r;
           if (!out->error.empty()) msg << ": " << out->error;
           progress.line(msg.str(), live);
@@ -327,8 +327,8 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         k.task = std::move(row);
         k.task_start = k.last_seen = Clock::now();
         k.ready = false;
-        progress.line(describe_task(job, static_cast<std::size_t>(k.task->index)) + " started on rank " +
-                          std::to_string(r) + " (task id " + std::to_string(k.task->id) + ")",
+        progress.line(describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + " started on rank " +
+                          std::to_string(r),
                       live);
         test_root_stall_hook();
       }

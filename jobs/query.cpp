@@ -65,7 +65,55 @@ std::string csv_escape(const std::string& s) {
 struct Table {
   std::vector<std::string> header;
   std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> footnotes;  // printed under a table for reading
 };
+
+// A task's message split by kind: the store keeps a failed task's reason and a done
+// task's warnings ("warning: ...") in one column; readers and scripts want them apart.
+struct Message {
+  std::string error, warning;
+};
+Message message_of(const db::TaskRow& t) {
+  static const std::string kPrefix = "warning: ";
+  if (t.status == "done" && t.error.rfind(kPrefix, 0) == 0) return {"", t.error.substr(kPrefix.size())};
+  if (t.status == "done") return {"", t.error};
+  return {t.error, ""};
+}
+
+// In a table for reading, a long message repeated on every row drowns the numbers:
+// each distinct message gets a tag ([1], [2], ...) in the row, and is printed once
+// under the table with the tasks that carry it.
+void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t column) {
+  std::vector<std::string> texts;
+  std::vector<std::vector<std::int64_t>> tasks;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Message m = message_of(rows[i].task);
+    const std::string text = m.error.empty() ? (m.warning.empty() ? "" : "warning: " + m.warning) : m.error;
+    if (text.empty()) continue;
+    auto it = std::find(texts.begin(), texts.end(), text);
+    if (it == texts.end()) {
+      texts.push_back(text);
+      tasks.emplace_back();
+      it = texts.end() - 1;
+    }
+    const std::size_t k = static_cast<std::size_t>(it - texts.begin());
+    tasks[k].push_back(rows[i].task.id);
+    t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + (m.error.empty() ? "warning" : "error");
+  }
+  for (std::size_t k = 0; k < texts.size(); ++k) {
+    std::string ids;
+    for (std::size_t j = 0; j < tasks[k].size(); ++j) {
+      if (j == 8) {
+        ids += ", ... (" + std::to_string(tasks[k].size()) + " tasks)";
+        break;
+      }
+      ids += (j ? ", " : "") + std::to_string(tasks[k][j]);
+    }
+    std::string text = texts[k];
+    std::replace_if(text.begin(), text.end(), [](char ch) { return ch == '\n' || ch == '\r'; }, ' ');
+    t.footnotes.push_back("[" + std::to_string(k + 1) + "] task" + (tasks[k].size() > 1 ? "s " : " ") + ids + ": " + text);
+  }
+}
 
 std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool varying_only) {
   std::vector<std::string> keys;
@@ -142,20 +190,30 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   t.header.insert(t.header.end(), params.begin(), params.end());
   // A metric named like a parameter (the collision scene's `steps`) gets its own
   // header, "metric.NAME": CSV readers key columns by header.
+  // A table for reading has one message column (tags, the texts below it); CSV has
+  // an error and a warning column, so that a script can tell them apart.
+  const std::vector<std::string> message_columns =
+      for_reading ? std::vector<std::string>{"message"} : std::vector<std::string>{"error", "warning"};
   for (const auto& m : mets) {
-    const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() || m == "error/warning";
+    const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() ||
+                       std::find(message_columns.begin(), message_columns.end(), m) != message_columns.end();
     t.header.push_back(taken ? "metric." + m : m);
   }
-  t.header.push_back("error/warning");
+  t.header.insert(t.header.end(), message_columns.begin(), message_columns.end());
   for (const auto& r : rows) {
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
     for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
-    line.push_back(r.task.error);
-    if (for_reading)  // a table row is one line: an error message's line breaks become spaces
-      std::replace_if(line.back().begin(), line.back().end(), [](char ch) { return ch == '\n' || ch == '\r'; }, ' ');
+    const Message msg = message_of(r.task);
+    if (for_reading) {
+      line.push_back("");  // filled by tag_messages
+    } else {
+      line.push_back(msg.error);
+      line.push_back(msg.warning);
+    }
     t.rows.push_back(std::move(line));
   }
+  if (for_reading) tag_messages(t, rows, t.header.size() - 1);
   return t;
 }
 
@@ -176,6 +234,7 @@ void print_table(std::ostream& out, const Table& t) {
   };
   line(t.header);
   for (const auto& r : t.rows) line(r);
+  for (const auto& f : t.footnotes) out << f << "\n";
 }
 
 nlohmann::json json_number(double v) {
@@ -193,7 +252,9 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
                         {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
                         {"key", r.task.key},         {"params", r.params},    {"metrics", m},
                         {"wall_s", json_number(r.task.wall_s)}};
-    if (!r.task.error.empty()) o[r.task.status == "done" ? "warning" : "error"] = r.task.error;
+    const Message msg = message_of(r.task);
+    if (!msg.error.empty()) o["error"] = msg.error;
+    if (!msg.warning.empty()) o["warning"] = msg.warning;
     arr.push_back(std::move(o));
   }
   out << arr.dump(2) << "\n";

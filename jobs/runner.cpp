@@ -61,7 +61,7 @@ class Runner {
   void handle_exit(const Running& r, int wstatus, bool stopping);
   void stop_all();
   Counts counts();
-  std::string describe_task(std::size_t index) const;
+  std::string describe_task(std::size_t index, std::int64_t task_id) const;
   double eta() ;
 
   db::Store& store_;
@@ -120,7 +120,9 @@ void Runner::refill_queue() {
     if (row.status == "pending" && opt_.shard.contains(static_cast<std::size_t>(row.index))) queue_.push_back(std::move(row));
 }
 
-std::string Runner::describe_task(std::size_t index) const { return jobs::describe_task(job_, index); }
+std::string Runner::describe_task(std::size_t index, std::int64_t task_id) const {
+  return jobs::describe_task(job_, index, task_id);
+}
 
 void Runner::launch(const db::TaskRow& row) {
   WorkerTask t;
@@ -154,7 +156,7 @@ void Runner::launch(const db::TaskRow& row) {
   }
   store_.set_pid(row.id, pid);
   running_.push_back(Running{row.id, t.index, pid, t.result_path, std::chrono::steady_clock::now()});
-  progress_.line(describe_task(t.index) + " started (task id " + std::to_string(row.id) + ")", counts());
+  progress_.line(describe_task(t.index, row.id) + " started", counts());
 }
 
 Counts Runner::counts() {
@@ -184,7 +186,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   std::filesystem::remove(r.result_path);
   if (!out && stopping) {
     store_.release(r.task_id, token_, "interrupted; will be retried");
-    progress_.line(describe_task(r.index) + " interrupted, back in the queue", counts());
+    progress_.line(describe_task(r.index, r.task_id) + " interrupted, back in the queue", counts());
     return;
   }
   if (!out) {
@@ -199,7 +201,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   ++ran_;
   busy_s_ += out->wall_s;
   std::ostringstream msg;
-  msg << describe_task(r.index) << " " << out->status << " in " << format_duration(out->wall_s);
+  msg << describe_task(r.index, r.task_id) << " " << out->status << " in " << format_duration(out->wall_s);
   if (!out->error.empty()) msg << ": " << out->error;
   progress_.line(msg.str(), counts());
 }
@@ -307,13 +309,13 @@ void record_final_counts(const Counts& c, RunSummary& s) {
   s.unfinished = c.total - c.done - c.failed;
 }
 
-std::string describe_task(const Job& job, std::size_t index) {
-  std::string s = "task #" + std::to_string(index);
+std::string describe_task(const Job& job, std::size_t index, std::int64_t task_id) {
+  const std::string s = "task " + std::to_string(task_id);
   if (index >= job.tasks.size()) return s;
   std::string axes;
-  for (const auto& a : job.axes) axes += (axes.empty() ? "" : " ") + a + "=" + job.tasks[index].params.at(a).dump();
-  if (job.replicas > 1) axes += (axes.empty() ? "" : " ") + std::string("seed=") + job.tasks[index].params.at("seed").dump();
-  return axes.empty() ? s : s + " (" + axes + ")";
+  for (const auto& a : job.axes) axes += " " + a + "=" + job.tasks[index].params.at(a).dump();
+  if (job.replicas > 1) axes += std::string(" seed=") + job.tasks[index].params.at("seed").dump();
+  return s + " (#" + std::to_string(index) + (axes.empty() ? "" : ":" + axes) + ")";
 }
 
 RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options) {

@@ -41,7 +41,8 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
 std::string task_output_dir(const Job& job, const RunOptions& options);
 // The job's task counts at the end of a run, into the summary.
 void record_final_counts(const Counts& c, RunSummary& s);
-// "task #3 (dt_factor=0.1)" for progress lines.
-std::string describe_task(const Job& job, std::size_t index);
+// "task 7 (#3: dt_factor=0.1)" for progress lines: the task id that query, status and
+// plot take, then the position in the job's grid and its values.
+std::string describe_task(const Job& job, std::size_t index, std::int64_t task_id);
 
 }  // namespace demcal::jobs

@@ -595,9 +595,10 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     }
   }
   if (res.max_inertial_number > cfg.quasi_static_inertial)
-    res.outcome.warnings.push_back("not quasi-static: largest inertial number " + fmt(res.max_inertial_number) +
+    res.outcome.warnings.push_back("not quasi-static: largest inertial number (strain rate * d_mean * sqrt(rho/p)) " +
+                                   fmt(res.max_inertial_number) +
                                    " exceeds " + fmt(cfg.quasi_static_inertial) +
-                                   " (a slower triaxial.strain_rate or a smaller scaled_density lowers it)");
+                                   " (a slower triaxial.strain_rate or a smaller triaxial.scaled_density lowers it)");
   if (cfg.shear_damping > 0.0)
     res.outcome.warnings.push_back("local damping " + fmt(cfg.shear_damping) +
                                    " was on during shear: a diagnostic, not the seed's undamped protocol; its forces "

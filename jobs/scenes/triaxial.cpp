@@ -109,7 +109,7 @@ engine::TriaxialConfig config_from(const nlohmann::json& p) {
 }
 
 // Sample size and shear rate per fidelity, when the job gives none, set from the
-// fidelity study (docs/studies.md): quick: a smoke test (8-11 s a task on one core,
+// fidelity study (docs/studies.md): quick: a smoke test (7-22 s a task on one core,
 // inertial number ~4e-3: not quasi-static, good to ~2-3 deg); standard: 2,000
 // grains at 1e-4 /s, the reference of the particle and rate knobs (1,000 grains
 // are within 0.5 deg of it); reference: more grains, slower shear.

@@ -34,6 +34,15 @@ TEST(Runner, CrashingWorkerFailsOnlyItsTask) {
   EXPECT_EQ(st.rc, 0) << st.err;
   EXPECT_NE(st.out.find("crash: task " + std::to_string(rows[1].id) + " failed: "), std::string::npos) << st.out;
   EXPECT_NE(st.out.find("SIGABRT"), std::string::npos) << st.out;
+  // query: the table tags the message in its row and prints it once below; CSV keeps
+  // errors and warnings in columns of their own.
+  const Result q = run_demcal({"query", "--job", "crash"}, d.path.string());
+  EXPECT_EQ(q.rc, 0) << q.err;
+  EXPECT_NE(q.out.find("[1] error"), std::string::npos) << q.out;
+  EXPECT_NE(q.out.find("[1] task " + std::to_string(rows[1].id) + ": "), std::string::npos) << q.out;
+  EXPECT_EQ(q.out.find("SIGABRT"), q.out.rfind("SIGABRT")) << "the message once, under the table: " << q.out;
+  const Result csv = run_demcal({"query", "--job", "crash", "--format", "csv"}, d.path.string());
+  EXPECT_NE(csv.out.find(",error,warning\n"), std::string::npos) << csv.out;
   // Failed tasks stay failed on a plain re-run, and run again on request.
   EXPECT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 1);
   EXPECT_EQ(tasks_of(d.file("demcal.db"), "crash")[1].attempts, 1);
