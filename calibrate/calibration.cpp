@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <set>
 
 namespace demcal::calibrate {
@@ -105,6 +106,19 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                 " do not overlap in (theta, eta)");
   }
   cal.result = invert(cal.models, req.targets, box, req.options);
+  // The surrogates stand on these results: say when they carry warnings, once a job.
+  std::map<std::string, const ResponseSurface*> warned;
+  for (const auto& rs : cal.surfaces)
+    if (rs.warned > 0 && (!warned.count(rs.job) || rs.warned > warned[rs.job]->warned)) warned[rs.job] = &rs;
+  for (const auto& [job, rs] : warned) {
+    std::string w = rs->first_warning;
+    if (w.rfind("warning: ", 0) == 0) w = w.substr(9);
+    if (w.size() > 160) w = w.substr(0, 157) + "...";
+    int used = 0;
+    for (const auto& p : rs->points) used += static_cast<int>(p.values.size());
+    cal.result.warnings.push_back(std::to_string(rs->warned) + " of the " + std::to_string(used) + " results used from job " +
+                                  job + " carry warnings (demcal query --job " + job + "), e.g.: " + w);
+  }
   return cal;
 }
 

@@ -220,10 +220,12 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     }
     const auto& st = row.r.task.status;
     if (st == "done") {
-      if (auto v = metric_value(spec, row.r.metrics))
+      if (auto v = metric_value(spec, row.r.metrics)) {
         p.values.push_back(*v);
-      else
+        if (!row.r.task.error.empty() && rs.warned++ == 0) rs.first_warning = row.r.task.error;
+      } else {
         ++p.missing;
+      }
     } else if (st == "failed") {
       ++p.failed;
     } else {

@@ -34,6 +34,8 @@ struct ResponseSurface {
   std::vector<GridPoint> points;     // grid points first (job order), then refinement points
   std::vector<double> thetas, etas;  // the job grid's distinct axis values, ascending
   double pooled_sd = kNaN;           // replica standard deviation pooled over points with n >= 2
+  int warned = 0;                    // finished tasks used that carry warnings (not quasi-static, ...)
+  std::string first_warning;         // the first of them, as stored
 
   Box box() const;                   // the job grid's bounds
   int holes() const;

@@ -120,6 +120,28 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   EXPECT_DOUBLE_EQ(j["targets"][0]["sigma"].get<double>(), 0.5);
 }
 
+TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
+  TempDir d;
+  const std::string db = make_db(d, /*with_holes=*/false);
+  const double th = 28, et = 0.22;
+  const std::vector<std::string> args = {"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)),
+                                         "--target", "phi_cv=" + std::to_string(phi_cv_fn(th, et))};
+  auto r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_EQ((r.out + r.err).find("carry warnings"), std::string::npos) << "clean results, no such warning";
+  {
+    db::Connection c(db, /*read_only=*/false);
+    c.exec("UPDATE tasks SET error = 'warning: not quasi-static: test' WHERE id IN (1, 2, 3)");
+    db::Store s(db, true);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_peak").warned, 3);
+  }
+  r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("3 of the 72 results used from job grid carry warnings"), std::string::npos)
+      << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("e.g.: not quasi-static: test"), std::string::npos) << r.out << r.err;
+}
+
 TEST(CalibrateCli, UnreachableTargetExitsNonZeroNamingTheBound) {
   TempDir d;
   make_db(d);
