@@ -151,6 +151,36 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
   if (more > 0) job.notes.push_back("and " + std::to_string(more) + " more task(s) past the critical step");
 }
 
+// What the settings predict a run will warn about, said once per distinct advice
+// with the tasks it concerns ("all N tasks" when it is every one).
+void note_advice(const SceneDef& scene, Job& job) {
+  if (!scene.advice) return;
+  std::vector<std::string> texts;
+  std::vector<std::vector<std::size_t>> tasks;
+  for (std::size_t i = 0; i < job.tasks.size(); ++i) {
+    const std::string a = scene.advice(job.tasks[i].params);
+    if (a.empty()) continue;
+    auto it = std::find(texts.begin(), texts.end(), a);
+    if (it == texts.end()) {
+      texts.push_back(a);
+      tasks.emplace_back();
+      it = texts.end() - 1;
+    }
+    tasks[static_cast<std::size_t>(it - texts.begin())].push_back(i);
+  }
+  for (std::size_t k = 0; k < texts.size(); ++k) {
+    std::string who;
+    if (tasks[k].size() == job.tasks.size()) {
+      who = job.tasks.size() == 1 ? "the task" : "all " + std::to_string(job.tasks.size()) + " tasks";
+    } else {
+      who = "task" + std::string(tasks[k].size() > 1 ? "s " : " ");
+      for (std::size_t j = 0; j < tasks[k].size() && j < 8; ++j) who += (j ? ", " : "") + std::to_string(tasks[k][j]);
+      if (tasks[k].size() > 8) who += ", ... (" + std::to_string(tasks[k].size()) + ")";
+    }
+    job.notes.push_back(who + ": " + texts[k]);
+  }
+}
+
 void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
   const ParamSet set = read_params(j, scene);
   for (const auto& a : set.axes) job.axes.push_back(a.name);
@@ -173,6 +203,7 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     job.tasks.push_back(std::move(t));
   }
   note_unstable_steps(scene, job);
+  note_advice(scene, job);
 }
 
 }  // namespace

@@ -38,6 +38,9 @@ struct SceneDef {
   std::vector<std::string> headline;
   // One task's time step against its isolated contacts' limit, before it runs.
   std::function<engine::StepForecast(const nlohmann::json& params)> forecast;
+  // What a task's settings predict the run will warn about (empty: nothing), said by
+  // validate and run before it starts.
+  std::function<std::string(const nlohmann::json& params)> advice;
 };
 
 const SceneDef* find_scene(const std::string& name);

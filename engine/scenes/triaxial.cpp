@@ -33,6 +33,11 @@ StepForecast TriaxialConfig::step_forecast() const {
   return forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
 }
 
+double TriaxialConfig::nominal_inertial_number() const {
+  const double d_mean = 0.5 * (material.d_min + material.d_max);
+  return strain_rate * d_mean * std::sqrt(grain_density() / confining_pressure);
+}
+
 void TriaxialConfig::validate() const {
   material.validate();
   auto positive = [](double v, const char* f) {

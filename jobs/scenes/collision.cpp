@@ -96,7 +96,8 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 SceneDef scene_collision() {
   return SceneDef{kSection, collision_params(), resolve, run,
                   /*headline=*/{"dt_over_critical", "drift_per_million_steps", "max_relative_error", "wall_s"},
-                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); }};
+                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
+                  /*advice=*/nullptr};
 }
 
 }  // namespace demcal::jobs

@@ -163,7 +163,8 @@ SceneDef scene_repose() {
   return SceneDef{kSection, repose_params(), resolve, run,
                   /*headline=*/{"repose_deg", "repose_fit_err_deg", "runout_ratio", "time_to_rest_s", "particles",
                                 "wall_s"},
-                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); }};
+                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
+                  /*advice=*/nullptr};
 }
 
 }  // namespace demcal::jobs

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 namespace demcal::jobs {
 namespace {
@@ -199,13 +200,27 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
+// The quasi-static check, forecast: at the start of shear the mean stress is p0, so
+// a nominal inertial number above the limit is a warning every such task will carry.
+std::string advice(const nlohmann::json& p) {
+  const engine::TriaxialConfig c = config_from(p);
+  const double i0 = c.nominal_inertial_number();
+  if (!(i0 > c.quasi_static_inertial)) return "";
+  std::ostringstream os;
+  os.precision(2);
+  os << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
+     << c.quasi_static_inertial << ": the run will warn not quasi-static";
+  return os.str();
+}
+
 }  // namespace
 
 SceneDef scene_triaxial() {
   return SceneDef{kSection, triaxial_params(), resolve, run,
                   /*headline=*/{"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_interior_initial", "eps_v_final",
                                 "max_inertial_number", "particles", "wall_s"},
-                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); }};
+                  /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
+                  /*advice=*/advice};
 }
 
 }  // namespace demcal::jobs

@@ -242,6 +242,28 @@ const std::vector<Bad>& bad_cases() {
 }
 }  // namespace
 
+TEST(TriaxialReposeScenes, ANotQuasiStaticShearIsNotedBeforeTheRun) {
+  // I = rate * d_mean * sqrt(rho / p0): 1e-4 /s * 1.5 mm * sqrt(2.65e12 / 1e5) = 7.7e-4,
+  // below the limit 1e-3; 5e-4 /s gives 3.9e-3, which the run would warn about.
+  auto inertial_notes = [](const Job& job) {
+    std::vector<std::string> v;
+    for (const auto& n : job.notes)
+      if (n.find("inertial number") != std::string::npos) v.push_back(n);
+    return v;
+  };
+  json j = triaxial_base();
+  EXPECT_TRUE(inertial_notes(parse(j)).empty());
+  j["triaxial"]["strain_rate"] = 5e-4;
+  auto notes = inertial_notes(parse(j));
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_EQ(notes[0].rfind("all 2 tasks: inertial number 0.0039 at p0", 0), 0u) << notes[0];
+  EXPECT_NE(notes[0].find("the run will warn not quasi-static"), std::string::npos) << notes[0];
+  j["grid"] = {{"strain_rate", {1e-4, 5e-4}}};
+  notes = inertial_notes(parse(j));
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_EQ(notes[0].rfind("task 1: inertial number", 0), 0u) << notes[0];
+}
+
 class BadTriaxialReposeJob : public ::testing::TestWithParam<Bad> {};
 
 TEST_P(BadTriaxialReposeJob, RejectedNamingTheField) {
