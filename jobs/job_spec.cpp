@@ -4,6 +4,7 @@
 #include "job_error.hpp"
 #include "scene_registry.hpp"
 #include "task_key.hpp"
+#include "text_groups.hpp"
 #include "validate.hpp"
 
 #include <algorithm>
@@ -155,29 +156,17 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
 // with the tasks it concerns ("all N tasks" when it is every one).
 void note_advice(const SceneDef& scene, Job& job) {
   if (!scene.advice) return;
-  std::vector<std::string> texts;
-  std::vector<std::vector<std::size_t>> tasks;
+  TextGroups groups;
   for (std::size_t i = 0; i < job.tasks.size(); ++i) {
     const std::string a = scene.advice(job.tasks[i].params);
-    if (a.empty()) continue;
-    auto it = std::find(texts.begin(), texts.end(), a);
-    if (it == texts.end()) {
-      texts.push_back(a);
-      tasks.emplace_back();
-      it = texts.end() - 1;
-    }
-    tasks[static_cast<std::size_t>(it - texts.begin())].push_back(i);
+    if (!a.empty()) groups.add(a, static_cast<std::int64_t>(i));
   }
-  for (std::size_t k = 0; k < texts.size(); ++k) {
-    std::string who;
-    if (tasks[k].size() == job.tasks.size()) {
-      who = job.tasks.size() == 1 ? "the task" : "all " + std::to_string(job.tasks.size()) + " tasks";
-    } else {
-      who = "task" + std::string(tasks[k].size() > 1 ? "s " : " ");
-      for (std::size_t j = 0; j < tasks[k].size() && j < 8; ++j) who += (j ? ", " : "") + std::to_string(tasks[k][j]);
-      if (tasks[k].size() > 8) who += ", ... (" + std::to_string(tasks[k].size()) + ")";
-    }
-    job.notes.push_back(who + ": " + texts[k]);
+  for (std::size_t k = 0; k < groups.texts.size(); ++k) {
+    const bool every = groups.tasks[k].size() == job.tasks.size();
+    const std::string who = !every ? task_list(groups.tasks[k])
+                            : job.tasks.size() == 1 ? "the task"
+                                                    : "all " + std::to_string(job.tasks.size()) + " tasks";
+    job.notes.push_back(who + ": " + groups.texts[k]);
   }
 }
 

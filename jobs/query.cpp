@@ -3,6 +3,7 @@
 #include "job_error.hpp"
 #include "params.hpp"
 #include "scene_registry.hpp"
+#include "text_groups.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -84,34 +85,18 @@ Message message_of(const db::TaskRow& t) {
 // each distinct message gets a tag ([1], [2], ...) in the row, and is printed once
 // under the table with the tasks that carry it.
 void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t column) {
-  std::vector<std::string> texts;
-  std::vector<std::vector<std::int64_t>> tasks;
+  TextGroups groups;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const Message m = message_of(rows[i].task);
     const std::string text = m.error.empty() ? (m.warning.empty() ? "" : "warning: " + m.warning) : m.error;
     if (text.empty()) continue;
-    auto it = std::find(texts.begin(), texts.end(), text);
-    if (it == texts.end()) {
-      texts.push_back(text);
-      tasks.emplace_back();
-      it = texts.end() - 1;
-    }
-    const std::size_t k = static_cast<std::size_t>(it - texts.begin());
-    tasks[k].push_back(rows[i].task.id);
+    const std::size_t k = groups.add(text, rows[i].task.id);
     t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + (m.error.empty() ? "warning" : "error");
   }
-  for (std::size_t k = 0; k < texts.size(); ++k) {
-    std::string ids;
-    for (std::size_t j = 0; j < tasks[k].size(); ++j) {
-      if (j == 8) {
-        ids += ", ... (" + std::to_string(tasks[k].size()) + " tasks)";
-        break;
-      }
-      ids += (j ? ", " : "") + std::to_string(tasks[k][j]);
-    }
-    std::string text = texts[k];
+  for (std::size_t k = 0; k < groups.texts.size(); ++k) {
+    std::string text = groups.texts[k];
     std::replace_if(text.begin(), text.end(), [](char ch) { return ch == '\n' || ch == '\r'; }, ' ');
-    t.footnotes.push_back("[" + std::to_string(k + 1) + "] task" + (tasks[k].size() > 1 ? "s " : " ") + ids + ": " + text);
+    t.footnotes.push_back("[" + std::to_string(k + 1) + "] " + task_list(groups.tasks[k]) + ": " + text);
   }
 }
 
