@@ -80,6 +80,27 @@ TEST(Store, CreatesSchemaWithVersionAndWal) {
   Store again(d.file("a.db"));  // reopening migrates nothing and succeeds
 }
 
+TEST(Store, ReadersLeaveNoWalFilesBehindAndCannotWrite) {
+  // query and status open the store read-only: closing must leave the database one
+  // file (a copy of demcal.db alone is then the whole record), and writes are refused.
+  TempDir d;
+  const std::string path = d.file("demcal.db");
+  {
+    Store s(path);
+    s.put_job("j", "{}", {{"k1", "collision", "{}"}});
+  }
+  ASSERT_FALSE(fs::exists(path + "-wal"));
+  {
+    Store r(path, /*read_only=*/true);
+    EXPECT_EQ(r.tasks("j").size(), 1u);
+    EXPECT_THROW(r.put_job("k", "{}", {{"k2", "collision", "{}"}}), DbError);
+  }
+  EXPECT_FALSE(fs::exists(path + "-wal"));
+  EXPECT_FALSE(fs::exists(path + "-shm"));
+  Store again(path, true);
+  EXPECT_EQ(again.tasks().size(), 1u) << "the refused write left nothing";
+}
+
 TEST(Store, RejectsNonSqliteFileUntouched) {
   TempDir d;
   const std::string p = d.file("notes.db");
