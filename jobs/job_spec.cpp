@@ -162,10 +162,8 @@ void note_advice(const SceneDef& scene, Job& job) {
     if (!a.empty()) groups.add(a, static_cast<std::int64_t>(i));
   }
   for (std::size_t k = 0; k < groups.texts.size(); ++k) {
-    const bool every = groups.tasks[k].size() == job.tasks.size();
-    const std::string who = !every ? task_list(groups.tasks[k])
-                            : job.tasks.size() == 1 ? "the task"
-                                                    : "all " + std::to_string(job.tasks.size()) + " tasks";
+    const bool one = job.tasks.size() == 1;
+    const std::string who = one ? "the task" : task_list(groups.tasks[k], job.tasks.size());
     job.notes.push_back(who + ": " + groups.texts[k]);
   }
 }

@@ -96,7 +96,7 @@ void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t colu
   for (std::size_t k = 0; k < groups.texts.size(); ++k) {
     std::string text = groups.texts[k];
     std::replace_if(text.begin(), text.end(), [](char ch) { return ch == '\n' || ch == '\r'; }, ' ');
-    t.footnotes.push_back("[" + std::to_string(k + 1) + "] " + task_list(groups.tasks[k]) + ": " + text);
+    t.footnotes.push_back("[" + std::to_string(k + 1) + "] " + task_list(groups.tasks[k], rows.size()) + ": " + text);
   }
 }
 

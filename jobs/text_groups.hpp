@@ -26,11 +26,14 @@ struct TextGroups {
   }
 };
 
-// "task 3" or "tasks 1, 2, ... (12)": at most `shown` ids, then the count.
-inline std::string task_list(const std::vector<std::int64_t>& ids, std::size_t shown = 8) {
+// "task 3", "tasks 1, 2, 5" or "tasks 1, 2, ... (12)"; "all 9 tasks" when the ids
+// are every one of `of` (0: unknown). At most `shown` ids before the count.
+inline std::string task_list(const std::vector<std::int64_t>& ids, std::size_t of = 0, std::size_t shown = 8) {
+  if (of > 1 && ids.size() == of) return "all " + std::to_string(of) + " tasks";
   std::string s = ids.size() > 1 ? "tasks " : "task ";
-  for (std::size_t j = 0; j < ids.size() && j < shown; ++j) s += (j ? ", " : "") + std::to_string(ids[j]);
-  if (ids.size() > shown) s += ", ... (" + std::to_string(ids.size()) + ")";
+  const std::size_t listed = ids.size() > shown + 1 ? shown : ids.size();
+  for (std::size_t j = 0; j < listed; ++j) s += (j ? ", " : "") + std::to_string(ids[j]);
+  if (listed < ids.size()) s += ", ... (" + std::to_string(ids.size()) + ")";
   return s;
 }
 
