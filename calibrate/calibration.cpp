@@ -112,7 +112,6 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     if (rs.warned > 0 && (!warned.count(rs.job) || rs.warned > warned[rs.job]->warned)) warned[rs.job] = &rs;
   for (const auto& [job, rs] : warned) {
     std::string w = rs->first_warning;
-    if (w.rfind("warning: ", 0) == 0) w = w.substr(9);
     if (w.size() > 160) w = w.substr(0, 157) + "...";
     int used = 0;
     for (const auto& p : rs->points) used += static_cast<int>(p.values.size());

@@ -222,7 +222,8 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     if (st == "done") {
       if (auto v = metric_value(spec, row.r.metrics)) {
         p.values.push_back(*v);
-        if (!row.r.task.error.empty() && rs.warned++ == 0) rs.first_warning = row.r.task.error;
+        const std::string w = db::task_message(row.r.task).warning;
+        if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
       } else {
         ++p.missing;
       }

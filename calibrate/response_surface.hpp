@@ -35,7 +35,7 @@ struct ResponseSurface {
   std::vector<double> thetas, etas;  // the job grid's distinct axis values, ascending
   double pooled_sd = kNaN;           // replica standard deviation pooled over points with n >= 2
   int warned = 0;                    // finished tasks used that carry warnings (not quasi-static, ...)
-  std::string first_warning;         // the first of them, as stored
+  std::string first_warning;         // the first of them (db::task_message's warning)
 
   Box box() const;                   // the job grid's bounds
   int holes() const;

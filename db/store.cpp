@@ -40,6 +40,18 @@ TaskRow read_task(const Statement& s, int first = 0) {
 
 }  // namespace
 
+namespace {
+const std::string kWarningMark = "warning: ";
+}  // namespace
+
+std::string warning_message(const std::string& warnings) { return kWarningMark + warnings; }
+
+TaskMessage task_message(const TaskRow& t) {
+  if (t.status != "done") return {t.error, ""};
+  if (t.error.rfind(kWarningMark, 0) == 0) return {"", t.error.substr(kWarningMark.size())};
+  return {"", t.error};
+}
+
 double unix_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }

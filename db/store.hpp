@@ -100,4 +100,12 @@ class Store {
 
 double unix_now();
 
+// A task's message column holds a failed task's reason, or a done task's warnings
+// marked "warning: ". These say which, so that no reader parses the mark itself.
+std::string warning_message(const std::string& warnings);  // what a done task with warnings stores
+struct TaskMessage {
+  std::string error, warning;  // at most one is set; the warning without its mark
+};
+TaskMessage task_message(const TaskRow& t);
+
 }  // namespace demcal::db

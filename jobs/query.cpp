@@ -69,27 +69,15 @@ struct Table {
   std::vector<std::string> footnotes;  // printed under a table for reading
 };
 
-// A task's message split by kind: the store keeps a failed task's reason and a done
-// task's warnings ("warning: ...") in one column; readers and scripts want them apart.
-struct Message {
-  std::string error, warning;
-};
-Message message_of(const db::TaskRow& t) {
-  static const std::string kPrefix = "warning: ";
-  if (t.status == "done" && t.error.rfind(kPrefix, 0) == 0) return {"", t.error.substr(kPrefix.size())};
-  if (t.status == "done") return {"", t.error};
-  return {t.error, ""};
-}
-
 // In a table for reading, a long message repeated on every row drowns the numbers:
 // each distinct message gets a tag ([1], [2], ...) in the row, and is printed once
 // under the table with the tasks that carry it.
 void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t column) {
   TextGroups groups;
   for (std::size_t i = 0; i < rows.size(); ++i) {
-    const Message m = message_of(rows[i].task);
-    const std::string text = m.error.empty() ? (m.warning.empty() ? "" : "warning: " + m.warning) : m.error;
-    if (text.empty()) continue;
+    const db::TaskMessage m = db::task_message(rows[i].task);
+    if (m.error.empty() && m.warning.empty()) continue;
+    const std::string text = m.error.empty() ? db::warning_message(m.warning) : m.error;
     const std::size_t k = groups.add(text, rows[i].task.id);
     t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + (m.error.empty() ? "warning" : "error");
   }
@@ -189,10 +177,10 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
     for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
-    const Message msg = message_of(r.task);
     if (for_reading) {
       line.push_back("");  // filled by tag_messages
     } else {
+      const db::TaskMessage msg = db::task_message(r.task);
       line.push_back(msg.error);
       line.push_back(msg.warning);
     }
@@ -237,7 +225,7 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
                         {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
                         {"key", r.task.key},         {"params", r.params},    {"metrics", m},
                         {"wall_s", json_number(r.task.wall_s)}};
-    const Message msg = message_of(r.task);
+    const db::TaskMessage msg = db::task_message(r.task);
     if (!msg.error.empty()) o["error"] = msg.error;
     if (!msg.warning.empty()) o["warning"] = msg.warning;
     arr.push_back(std::move(o));

@@ -55,10 +55,9 @@ nlohmann::json run_scene(const WorkerTask& t) {
   if (r.outcome.ok()) {
     out["status"] = "done";
     // A finished task's warnings (not quasi-static, a diagnostic knob on, ...) travel
-    // with it: the metrics stand, and the user must hear what they stand on.
-    std::string warnings;
-    for (const auto& w : r.outcome.warnings) warnings += (warnings.empty() ? "" : "; ") + w;
-    if (!warnings.empty()) out["warnings"] = warnings;
+    // with it: the metrics stand, and the user must hear what they stand on. A scene
+    // that ends ok joins its warnings into the message (SceneOutcome).
+    if (!r.outcome.message.empty()) out["warnings"] = r.outcome.message;
   } else {
     out["status"] = "failed";
     out["error"] = std::string(engine::to_string(r.outcome.status)) + " in stage " + r.outcome.failed_stage + ": " +
@@ -104,7 +103,7 @@ std::optional<db::Outcome> parse_worker_result(const std::string& text) {
     db::Outcome o;
     o.status = j.at("status").get<std::string>();
     o.error = j.value("error", "");
-    if (o.error.empty() && j.contains("warnings")) o.error = "warning: " + j.at("warnings").get<std::string>();
+    if (o.error.empty() && j.contains("warnings")) o.error = db::warning_message(j.at("warnings").get<std::string>());
     o.wall_s = j.at("wall_s").get<double>();
     for (const auto& m : j.at("metrics")) o.metrics.emplace_back(m.at(0).get<std::string>(), decode(m.at(1)));
     for (const auto& a : j.at("artifacts")) o.artifacts.emplace_back(a.at(0).get<std::string>(), a.at(1).get<std::string>());
