@@ -8,52 +8,50 @@
 namespace demcal::cli {
 namespace {
 
-// Why tasks failed, a few per job (their first line): the counts alone send the
-// user to `query` for the reason.
 // The query command that shows a job's tasks, naming the database unless it is the default.
 std::string query_hint(const std::string& db, const std::string& job) {
   return "demcal query" + (db == "demcal.db" ? std::string() : " --db " + db) + " --job " + job;
 }
 
-void print_failures(db::Store& store, const db::StatusCounts& counts, const std::string& db) {
-  constexpr int kShown = 3;
-  for (const auto& [name, by] : counts) {
-    const auto it = by.find("failed");
-    if (it == by.end() || it->second == 0) continue;
-    int shown = 0;
-    for (const auto& t : store.tasks(name)) {
-      if (t.status != "failed") continue;
-      std::string why = t.error.substr(0, t.error.find('\n'));
-      if (why.size() > 200) why = why.substr(0, 197) + "...";
-      std::cout << name << ": task " << t.id << " failed: " << why << "\n";
-      if (++shown == kShown) break;
-    }
-    if (it->second > kShown)
-      std::cout << name << ": " << it->second - kShown << " more failed (" << query_hint(db, name) << ")\n";
-  }
+std::string first_line(const std::string& text, std::size_t max) {
+  std::string s = text.substr(0, text.find('\n'));
+  return s.size() > max ? s.substr(0, max - 3) + "..." : s;
 }
 
-// Finished tasks whose metrics carry a warning (not quasi-static, a diagnostic on):
-// how many, and the first one's words.
-void print_warnings(db::Store& store, const db::StatusCounts& counts, const std::string& db) {
-  for (const auto& [name, by] : counts) {
-    const auto it = by.find("done");
-    if (it == by.end() || it->second == 0) continue;
-    int n = 0;
-    std::string first;
+// Why tasks failed, a few per job (their first line): the counts alone send the
+// user to `query` for the reason. Then finished tasks whose metrics carry a warning
+// (not quasi-static, a diagnostic on): how many, and the first one's words. Each
+// job's tasks are read once, for both.
+void print_messages(db::Store& store, const db::StatusCounts& counts, const std::string& db) {
+  constexpr int kShown = 3;
+  struct Warned {
+    std::string job, first;
     std::int64_t first_id = 0;
+    int n = 0;
+  };
+  std::vector<Warned> warned;
+  for (const auto& [name, by] : counts) {
+    const auto failed = by.find("failed"), done = by.find("done");
+    const bool any_failed = failed != by.end() && failed->second > 0;
+    if (!any_failed && (done == by.end() || done->second == 0)) continue;
+    int shown = 0;
+    Warned w{name, "", 0, 0};
     for (const auto& t : store.tasks(name)) {
-      if (t.status != "done" || t.error.empty()) continue;
-      if (n++ == 0) {
-        first = t.error.substr(0, t.error.find('\n'));
-        first_id = t.id;
+      if (t.status == "failed" && shown < kShown) {
+        std::cout << name << ": task " << t.id << " failed: " << first_line(t.error, 200) << "\n";
+        ++shown;
+      } else if (t.status == "done" && !t.error.empty() && w.n++ == 0) {
+        w.first = first_line(t.error, 200);
+        w.first_id = t.id;
       }
     }
-    if (n == 0) continue;
-    if (first.size() > 200) first = first.substr(0, 197) + "...";
-    std::cout << name << ": " << n << " done task(s) with warnings, e.g. task " << first_id << ": " << first
-              << " (" << query_hint(db, name) << " shows each)\n";
+    if (any_failed && failed->second > kShown)
+      std::cout << name << ": " << failed->second - kShown << " more failed (" << query_hint(db, name) << ")\n";
+    if (w.n > 0) warned.push_back(w);
   }
+  for (const auto& w : warned)
+    std::cout << w.job << ": " << w.n << " done task(s) with warnings, e.g. task " << w.first_id << ": " << w.first
+              << " (" << query_hint(db, w.job) << " shows each)\n";
 }
 
 }  // namespace
@@ -90,8 +88,7 @@ void add_status(CLI::App& app, int& exit_code) {
         }
         std::cout << std::setw(9) << total << "\n";
       }
-      print_failures(store, counts, *db);
-      print_warnings(store, counts, *db);
+      print_messages(store, counts, *db);
       return kOk;
     });
   });

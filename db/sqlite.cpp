@@ -14,33 +14,33 @@ namespace {
 }  // namespace
 
 Connection::Connection(const std::string& path, bool read_only) : path_(path) {
-  int rc = SQLITE_OK;
+  bool open = false;
   if (read_only) {
     // Readers open the file read-write (never creating it) with writes refused
     // (query_only): a connection opened SQLITE_OPEN_READONLY leaves the WAL's -wal and
     // -shm files behind when it closes, since it may not checkpoint and remove them.
     // Where the file or its folder is not writable, a true read-only open it is.
-    rc = sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr);
-    if (rc == SQLITE_OK && sqlite3_exec(db_, "PRAGMA query_only = ON", nullptr, nullptr, nullptr) == SQLITE_OK) {
-      sqlite3_busy_timeout(db_, 30000);
-      sqlite3_extended_result_codes(db_, 0);
-      return;
+    open = sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr) == SQLITE_OK &&
+           sqlite3_exec(db_, "PRAGMA query_only = ON", nullptr, nullptr, nullptr) == SQLITE_OK;
+    if (!open) {
+      sqlite3_close(db_);
+      db_ = nullptr;
     }
-    sqlite3_close(db_);
-    db_ = nullptr;
   }
-  const int flags = read_only ? SQLITE_OPEN_READONLY : (SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
-  rc = sqlite3_open_v2(path.c_str(), &db_, flags | SQLITE_OPEN_NOMUTEX, nullptr);
-  if (rc != SQLITE_OK) {
-    std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
-    sqlite3_close(db_);
-    db_ = nullptr;
-    const auto dir = std::filesystem::absolute(path).parent_path();
-    if (rc == SQLITE_CANTOPEN && !std::filesystem::is_directory(dir))
-      msg = "directory " + dir.string() + " does not exist";
-    // The path is the user's input: a file SQLite cannot open is bad input (exit 2).
-    throw DbError("cannot open database " + path + ": " + msg,
-                  rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT || rc == SQLITE_CANTOPEN);
+  if (!open) {
+    const int flags = read_only ? SQLITE_OPEN_READONLY : (SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+    const int rc = sqlite3_open_v2(path.c_str(), &db_, flags | SQLITE_OPEN_NOMUTEX, nullptr);
+    if (rc != SQLITE_OK) {
+      std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
+      sqlite3_close(db_);
+      db_ = nullptr;
+      const auto dir = std::filesystem::absolute(path).parent_path();
+      if (rc == SQLITE_CANTOPEN && !std::filesystem::is_directory(dir))
+        msg = "directory " + dir.string() + " does not exist";
+      // The path is the user's input: a file SQLite cannot open is bad input (exit 2).
+      throw DbError("cannot open database " + path + ": " + msg,
+                    rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT || rc == SQLITE_CANTOPEN);
+    }
   }
   // Two runners share one file: wait for the other's write lock instead of failing.
   sqlite3_busy_timeout(db_, 30000);
