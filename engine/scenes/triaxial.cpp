@@ -33,9 +33,16 @@ StepForecast TriaxialConfig::step_forecast() const {
   return forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
 }
 
+namespace {
+// The inertial number of a shear at `rate` on grains of mean diameter d and density
+// rho under mean stress p (GDR MiDi 2004): quasi-static well below 1e-3.
+double inertial_number(double rate, double d, double rho, double p) {
+  return p > 0 ? rate * d * std::sqrt(rho / p) : INFINITY;
+}
+}  // namespace
+
 double TriaxialConfig::nominal_inertial_number() const {
-  const double d_mean = 0.5 * (material.d_min + material.d_max);
-  return strain_rate * d_mean * std::sqrt(grain_density() / confining_pressure);
+  return inertial_number(strain_rate, 0.5 * (material.d_min + material.d_max), grain_density(), confining_pressure);
 }
 
 void TriaxialConfig::validate() const {
@@ -462,7 +469,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
       const Coordination z = coordination(world);
       const double ufr = unbalanced_force_ratio(world);
-      const double inertial = pm > 0 ? cfg.strain_rate * res.d_mean * std::sqrt(rho / pm) : INFINITY;
+      const double inertial = inertial_number(cfg.strain_rate, res.d_mean, rho, pm);
       for (int f = 0; f < 4; ++f) {
         const double e = std::abs(rig.face_stress(f) - cfg.confining_pressure) / cfg.confining_pressure;
         if (world.step_count() > s0) {
