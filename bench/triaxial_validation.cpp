@@ -54,12 +54,6 @@ const char* const kUsage =
     "  ramp lat_rate dt_factor=0.3 damping=0.3 shear_damping=0 pfactor unload ufr=0.01 stol=0.01 phi0=0.30\n"
     "  prep_rate budget=400000 alpha=0.5 beta=0.02 seed=1 threads=1 csv=triaxial_series.csv quiet=0\n";
 
-const std::set<std::string> kKeys = {"particles", "packing", "theta",  "eta",       "twist",     "b",
-                                     "p0",        "rate",    "strain", "ramp",      "lat_rate",  "dt_factor",
-                                     "damping",   "shear_damping",    "pfactor",   "unload",    "ufr",
-                                     "stol",      "phi0",    "prep_rate", "budget", "alpha",     "beta",
-                                     "seed",      "threads", "csv",    "quiet"};
-
 int main(int argc, char** argv) {
   std::map<std::string, std::string> kv;
   for (int i = 1; i < argc; ++i) {
@@ -73,30 +67,29 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "argument %s is not key=value\n%s", a.c_str(), kUsage);
       return 2;
     }
-    // A misspelt key would otherwise run the defaults (minutes) without a word.
-    if (!kKeys.count(a.substr(0, eq))) {
-      std::fprintf(stderr, "unknown key %s\n%s", a.substr(0, eq).c_str(), kUsage);
-      return 2;
-    }
     kv[a.substr(0, eq)] = a.substr(eq + 1);
   }
-  for (const auto& [k, v] : kv) {
-    if (k == "packing" || k == "csv") continue;
+  // Every key the driver reads is recorded: a key given but never read (a misspelt
+  // one) is refused below, before the run, instead of running the defaults (minutes).
+  std::set<std::string> read;
+  std::string bad;
+  auto num = [&](const char* k, double def) {
+    read.insert(k);
+    if (!kv.count(k)) return def;
     char* end = nullptr;
-    std::strtod(v.c_str(), &end);
-    if (v.empty() || *end != '\0') {
-      std::fprintf(stderr, "%s=%s: expected a number\n", k.c_str(), v.c_str());
-      return 2;
-    }
-  }
-  if (kv.count("packing") && kv["packing"] != "dense" && kv["packing"] != "loose") {
-    std::fprintf(stderr, "packing=%s: expected dense or loose\n", kv["packing"].c_str());
-    return 2;
-  }
-  auto num = [&](const char* k, double def) { return kv.count(k) ? std::atof(kv[k].c_str()) : def; };
+    const double v = std::strtod(kv[k].c_str(), &end);
+    if (kv[k].empty() || *end != '\0') bad = std::string(k) + "=" + kv[k] + ": expected a number";
+    return v;
+  };
+  auto text = [&](const char* k, const char* def) {
+    read.insert(k);
+    return kv.count(k) ? kv[k] : std::string(def);
+  };
+  const std::string packing = text("packing", "dense");
+  if (packing != "dense" && packing != "loose") bad = "packing=" + packing + ": expected dense or loose";
   TriaxialConfig c;
   c.particles = static_cast<std::size_t>(num("particles", 2000));
-  c.packing = kv.count("packing") && kv["packing"] == "loose" ? Packing::loose : Packing::dense;
+  c.packing = packing == "loose" ? Packing::loose : Packing::dense;
   c.material.friction_angle = deg_to_rad(num("theta", 30.0));
   c.material.rolling_eta = num("eta", 0.1);
   c.material.rolling_twist = num("twist", 0) != 0;
@@ -122,10 +115,20 @@ int main(int argc, char** argv) {
   c.servo_beta = num("beta", c.servo_beta);
   c.seed = static_cast<std::uint64_t>(num("seed", 1));
   c.threads = static_cast<int>(num("threads", 1));
-  const std::string csv = kv.count("csv") ? kv["csv"] : "triaxial_series.csv";
+  const std::string csv = text("csv", "triaxial_series.csv");
+  const bool quiet = num("quiet", 0) != 0;
+  for (const auto& entry : kv)
+    if (!read.count(entry.first)) {
+      std::fprintf(stderr, "unknown key %s\n%s", entry.first.c_str(), kUsage);
+      return 2;
+    }
+  if (!bad.empty()) {
+    std::fprintf(stderr, "%s\n", bad.c_str());
+    return 2;
+  }
 
   Printer obs;
-  obs.quiet = num("quiet", 0) != 0;
+  obs.quiet = quiet;
   TriaxialResult r;
   try {
     r = run_triaxial(c, &obs);
