@@ -1,6 +1,7 @@
 #pragma once
 // Helpers for running the demcal binary from tests.
 #include "db/store.hpp"
+#include "../temp_dir.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -19,18 +20,6 @@ namespace demcal::test {
 
 namespace fs = std::filesystem;
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path = fs::temp_directory_path() /
-           ("demcal-cli-" + std::to_string(getpid()) + "-" + info->test_suite_name() + "-" + info->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  std::string file(const std::string& n) const { return (path / n).string(); }
-};
 
 inline std::string slurp(const std::string& p) {
   std::ifstream f(p, std::ios::binary);

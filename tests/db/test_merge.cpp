@@ -3,7 +3,7 @@
 #include "db/merge.hpp"
 #include "db/store.hpp"
 
-#include "temp_dir.hpp"
+#include "../temp_dir.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 #include "db/schema.hpp"
 #include "db/store.hpp"
 
-#include "temp_dir.hpp"
+#include "../temp_dir.hpp"
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>

@@ -1,6 +1,7 @@
 // The triaxial and repose scenes in the jobs layer: their parameter tables, the
 // example jobs, fidelity presets, rejection of bad input naming the field, and one
 // quick task of each run through the runner into a temporary store.
+#include "../temp_dir.hpp"
 #include "db/merge.hpp"
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
@@ -301,16 +302,7 @@ TEST(TriaxialReposeScenes, BaseJobsAreValid) {
 
 namespace {
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path = fs::temp_directory_path() / ("demcal-jobs-" + std::to_string(getpid()) + "-" + info->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-};
+using demcal::test::TempDir;
 
 // Runs a one-task job with one worker and one engine thread; returns the task's
 // metrics by name, after checking it finished.
