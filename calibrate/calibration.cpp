@@ -9,6 +9,7 @@
 #include <iostream>
 #include <map>
 #include <set>
+#include <sstream>
 
 namespace demcal::calibrate {
 namespace {
@@ -29,6 +30,85 @@ bool job_has_metric(db::Store& store, const std::string& job, const MetricSpec& 
 }
 
 double round_to(double v, double q) { return std::round(v / q) * q; }
+
+std::string num(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
+std::string values_list(const std::vector<double>& v) {
+  std::string s;
+  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + num(v[i]);
+  return s;
+}
+
+// Two values on an axis cannot show a surface's curvature, and a leave-one-out error
+// measured on them cannot see it either: the fit would be confidently wrong.
+void require_levels(const ResponseSurface& rs, const std::string& job) {
+  const auto t = rs.data_thetas(), e = rs.data_etas();
+  if (t.size() >= 3 && e.size() >= 3) return;
+  throw JobError("--job", "job \"" + job + "\" has " + rs.metric + " at " + std::to_string(t.size()) + " theta value(s) (" +
+                              values_list(t) + ") and " + std::to_string(e.size()) + " eta value(s) (" + values_list(e) +
+                              "); a fit over (theta, eta) needs at least 3 of each: with 2 the surface is a plane along that "
+                              "axis and its error estimate cannot see the curvature it misses");
+}
+
+// phi_diff is phi_peak - phi_cv: with both of them it adds no information, and the
+// misfit would count their residuals twice (a region too small).
+void refuse_redundant(const std::vector<Target>& targets) {
+  auto has = [&](const char* m) {
+    return std::any_of(targets.begin(), targets.end(), [&](const Target& t) { return t.metric == m; });
+  };
+  if (has("phi_diff") && has("phi_peak") && has("phi_cv"))
+    throw JobError("--target", "phi_diff is phi_peak - phi_cv: with targets for both it adds nothing and would count their "
+                               "residuals twice; give two of the three");
+}
+
+// "at theta 40" / "at eta >= 0.3" ...: the part of the job's box without data.
+std::string box_cut(const Box& job, const Box& data) {
+  std::vector<std::string> parts;
+  if (data.theta_lo > job.theta_lo) parts.push_back("below theta " + num(data.theta_lo));
+  if (data.theta_hi < job.theta_hi) parts.push_back("above theta " + num(data.theta_hi));
+  if (data.eta_lo > job.eta_lo) parts.push_back("below eta " + num(data.eta_lo));
+  if (data.eta_hi < job.eta_hi) parts.push_back("above eta " + num(data.eta_hi));
+  std::string s;
+  for (std::size_t i = 0; i < parts.size(); ++i) s += (i ? ", " : "") + parts[i];
+  return s;
+}
+
+// The job-grid points without a value that are corners of a grid cell the fit's
+// region (or its best point) lies in: "theta 25, eta 0.3; ..."; "" when none.
+std::string gaps_under(const ResponseSurface& rs, const FitResult& fit) {
+  if (rs.thetas.size() < 2 || rs.etas.size() < 2) return "";
+  auto cell = [](const std::vector<double>& axis, double x) {  // index of the cell's lower corner
+    const auto it = std::upper_bound(axis.begin(), axis.end(), x);
+    return std::clamp(static_cast<int>(it - axis.begin()) - 1, 0, static_cast<int>(axis.size()) - 2);
+  };
+  const std::size_t nt = rs.thetas.size();
+  std::vector<char> used((nt - 1) * (rs.etas.size() - 1), 0);
+  auto mark = [&](double th, double et) { used[cell(rs.etas, et) * (nt - 1) + cell(rs.thetas, th)] = 1; };
+  mark(fit.theta, fit.eta);
+  const Region& R = fit.region;
+  for (int j = 0; j < R.n; ++j)
+    for (int i = 0; i < R.n; ++i)
+      if (R.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] == '1')
+        mark(fit.box.theta_lo + (fit.box.theta_hi - fit.box.theta_lo) * i / (R.n - 1),
+             fit.box.eta_lo + (fit.box.eta_hi - fit.box.eta_lo) * j / (R.n - 1));
+  std::string s;
+  for (const auto& p : rs.points) {
+    if (!p.hole() || p.refine) continue;
+    const auto ti = std::lower_bound(rs.thetas.begin(), rs.thetas.end(), p.theta) - rs.thetas.begin();
+    const auto ei = std::lower_bound(rs.etas.begin(), rs.etas.end(), p.eta) - rs.etas.begin();
+    bool under = false;  // any of the (up to) four cells the point is a corner of
+    for (long a = ti - 1; a <= ti; ++a)
+      for (long b = ei - 1; b <= ei; ++b)
+        if (a >= 0 && b >= 0 && a < static_cast<long>(nt) - 1 && b < static_cast<long>(rs.etas.size()) - 1)
+          under = under || used[static_cast<std::size_t>(b) * (nt - 1) + static_cast<std::size_t>(a)];
+    if (under) s += (s.empty() ? "" : "; ") + ("theta " + num(p.theta) + ", eta " + num(p.eta));
+  }
+  return s;
+}
 
 }  // namespace
 
@@ -63,18 +143,18 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
   std::set<std::string> seen;
   for (const auto& t : req.targets)
     if (!seen.insert(t.metric).second) throw JobError("--target", "metric \"" + t.metric + "\" given twice");
+  refuse_redundant(req.targets);
   Calibration cal;
   Box box;
   bool first = true;
+  std::vector<std::string> data_cuts;
   for (const auto& t : req.targets) {
     const std::string job = job_for_metric(store, t.metric, req.jobs, req.where);
     GatherOptions go;
     go.where = req.where;
     go.field = "--target";
     ResponseSurface rs = gather(store, job, t.metric, go);
-    if (rs.thetas.size() < 2 || rs.etas.size() < 2)
-      throw JobError("--job", "job \"" + job + "\" has " + std::to_string(rs.thetas.size()) + " theta value(s) and " +
-                                  std::to_string(rs.etas.size()) + " eta value(s); a fit over (theta, eta) needs at least 2 of each");
+    require_levels(rs, job);
     Model m;
     m.metric = t.metric;
     m.label = rs.label;
@@ -86,7 +166,10 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                   " points with data, " + std::to_string(rs.holes()) + " holes)");
     }
     m.replica_se = rs.replica_se();
-    const Box b = rs.box();
+    // The surrogate is trusted where its points are: failed edge rows cut the box.
+    const Box b = rs.data_box();
+    if (const std::string cut = box_cut(rs.box(), b); !cut.empty())
+      data_cuts.push_back("job " + job + " has no " + t.metric + " " + cut + ": the fit searches only where there is data");
     if (first) {
       box = b;
       first = false;
@@ -106,6 +189,23 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                 " do not overlap in (theta, eta)");
   }
   cal.result = invert(cal.models, req.targets, box, req.options);
+  for (const auto& c : data_cuts) cal.result.warnings.push_back(c);
+  if (cal.result.ok) {
+    // One warning per set of gaps: metrics of one job share their failed tasks.
+    std::vector<std::pair<std::string, std::string>> gaps;  // gaps, metrics
+    for (std::size_t k = 0; k < cal.surfaces.size(); ++k) {
+      const std::string g = gaps_under(cal.surfaces[k], cal.result);
+      if (g.empty()) continue;
+      auto it = std::find_if(gaps.begin(), gaps.end(), [&](const auto& e) { return e.first == g; });
+      if (it == gaps.end())
+        gaps.emplace_back(g, cal.models[k].metric);
+      else
+        it->second += " and " + cal.models[k].metric;
+    }
+    for (const auto& [g, metrics] : gaps)
+      cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics + " have no value at a corner (" + g +
+                                    "): the surrogate bridges the gap there; rerun or replace those tasks");
+  }
   // The surrogates stand on these results: say when they carry warnings, once a job.
   std::map<std::string, const ResponseSurface*> warned;
   for (const auto& rs : cal.surfaces)

@@ -121,6 +121,15 @@ bool Region::contains(const Box& box, double theta, double eta) const {
   return mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] == '1';
 }
 
+double surrogate_error(const Surrogate& s, double replica_se) {
+  // A LOO residual is the error of a surface fitted without the point plus the noise
+  // of the point's own mean (replica_se^2): that noise is not an error of the
+  // surface at a target, so it comes off. What is left cannot be less than the
+  // noise the surface itself carries from its points (mean leverage x se^2).
+  const double loo2 = s.loo_rms() * s.loo_rms(), se2 = replica_se * replica_se;
+  return std::sqrt(std::max(loo2 - se2, s.mean_leverage() * se2));
+}
+
 FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
                  const FitOptions& opt) {
   if (models.size() != targets.size() || targets.empty())
@@ -154,14 +163,12 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
         if (v > t.hi) t.hi = v, t.theta_at_hi = theta_at(i), t.eta_at_hi = eta_at(j);
       }
     t.sigma_given = std::isfinite(targets[k].sigma);
-    if (t.sigma_given) {
-      t.sigma = targets[k].sigma;
-    } else {
-      // Replica spread and surrogate error; floored so a perfect fit of noise-free
-      // data cannot make the misfit infinitely sharp.
-      t.sigma = std::sqrt(t.replica_se * t.replica_se + t.loo_rms * t.loo_rms);
-      t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
-    }
+    t.lab_sigma = t.sigma_given ? targets[k].sigma : 0.0;
+    t.surrogate_sigma = surrogate_error(models[k].surrogate, t.replica_se);
+    // The target's own uncertainty and the surrogate's error are independent; floored
+    // so a perfect fit of noise-free data cannot make the misfit infinitely sharp.
+    t.sigma = std::sqrt(t.lab_sigma * t.lab_sigma + t.surrogate_sigma * t.surrogate_sigma);
+    t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
     values[k] = t.target;
     sigmas[k] = t.sigma;
     res.targets.push_back(t);
@@ -316,13 +323,14 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                                " over a quarter of the eta range, less than its sigma " + g(res.targets[k].sigma, 2) +
                                "): it cannot pin eta there");
     }
+    // With more targets than unknowns the misfit at the best point is chi-square with
+    // K - 2 dof; with two or fewer it is zero wherever the targets are reachable.
     const int dof = static_cast<int>(K) - 2;
-    const double limit = dof >= 1 ? chi2_quantile(dof, 2.326) : 9.0;
+    const double limit = dof >= 1 ? chi2_quantile(dof, 2.326) : INFINITY;
     if (res.misfit > limit)
-      res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) + " at the best point (" +
-                             (dof >= 1 ? "above the 99% chi-square level " + g(limit, 3) + " for " + std::to_string(dof) + " dof"
-                                       : std::string("residuals above 2 sigma")) +
-                             "); no (theta, eta) in the grid reproduces all of them");
+      res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) +
+                             " at the best point (above the 99% chi-square level " + g(limit, 3) + " for " +
+                             std::to_string(dof) + " dof); no (theta, eta) in the grid reproduces all of them");
   }
   return res;
 }
@@ -344,7 +352,7 @@ nlohmann::json FitResult::to_json() const {
   j["targets"] = nlohmann::json::array();
   for (const auto& t : targets)
     j["targets"].push_back({{"metric", t.metric}, {"job", t.job}, {"target", num(t.target)}, {"sigma", num(t.sigma)},
-                            {"sigma_given", t.sigma_given}, {"predicted", num(t.predicted)}, {"residual", num(t.residual)},
+                            {"sigma_given", t.sigma_given}, {"lab_sigma", num(t.lab_sigma)}, {"surrogate_sigma", num(t.surrogate_sigma)}, {"predicted", num(t.predicted)}, {"residual", num(t.residual)},
                             {"loo_rms", num(t.loo_rms)}, {"replica_se", num(t.replica_se)}, {"range", {num(t.lo), num(t.hi)}}});
   j["region"] = {{"level", "misfit - min <= 5.99 (95%, 2 parameters)"},
                  {"theta_deg", {num(region.theta_lo), num(region.theta_hi)}},

@@ -14,7 +14,7 @@ namespace demcal::calibrate {
 struct Target {
   std::string metric;
   double value = kNaN;
-  double sigma = kNaN;  // given by the user; NaN: from replica spread and surrogate error
+  double sigma = kNaN;  // the target's own uncertainty (a laboratory's), given by the user; NaN: exact
 };
 
 // "phi_peak=41.4" -> {phi_peak, 41.4}. Throws JobError(field) when malformed.
@@ -30,9 +30,14 @@ struct Model {
   double replica_se = 0;
 };
 
+// The surrogate's error against the mean response it stands for: its LOO error with
+// the noise of a point's own mean taken out, at least the noise the surface carries.
+double surrogate_error(const Surrogate& s, double replica_se);
+
 struct TargetFit {
   std::string metric, job;
-  double target = kNaN, sigma = kNaN;
+  double target = kNaN, sigma = kNaN;  // sigma^2 = lab_sigma^2 + surrogate_sigma^2 (floored)
+  double lab_sigma = 0, surrogate_sigma = kNaN;
   bool sigma_given = false;
   double predicted = kNaN, residual = kNaN;  // residual = predicted - target
   double loo_rms = kNaN, replica_se = kNaN;

@@ -38,6 +38,26 @@ Box ResponseSurface::box() const {
   return b;
 }
 
+std::vector<double> ResponseSurface::data_thetas() const {
+  std::set<double> v;
+  for (const auto& p : points)
+    if (!p.hole()) v.insert(p.theta);
+  return {v.begin(), v.end()};
+}
+
+std::vector<double> ResponseSurface::data_etas() const {
+  std::set<double> v;
+  for (const auto& p : points)
+    if (!p.hole()) v.insert(p.eta);
+  return {v.begin(), v.end()};
+}
+
+Box ResponseSurface::data_box() const {
+  const auto t = data_thetas(), e = data_etas();
+  if (t.empty() || e.empty()) return Box{};
+  return {t.front(), t.back(), e.front(), e.back()};
+}
+
 int ResponseSurface::holes() const {
   int n = 0;
   for (const auto& p : points) n += p.hole() && !p.refine;

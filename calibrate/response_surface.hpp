@@ -38,6 +38,10 @@ struct ResponseSurface {
   std::string first_warning;         // the first of them (db::task_message's warning)
 
   Box box() const;                   // the job grid's bounds
+  Box data_box() const;              // the bounds of the points that have data
+  // Distinct theta (eta) values of the points that have data, ascending.
+  std::vector<double> data_thetas() const;
+  std::vector<double> data_etas() const;
   int holes() const;
   int with_data() const;
   // Standard error of a mean of a typical point: pooled_sd / sqrt(mean replica count);

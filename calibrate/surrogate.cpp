@@ -20,6 +20,7 @@ void monomials(double u, double v, int degree, double* out) {
 
 struct Trial {
   double loo_rms = INFINITY, loo_max = 0;
+  double leverage = 1;  // mean diagonal of the hat matrix: effective parameters / points
   Eigen::VectorXd w, poly;
 };
 
@@ -48,13 +49,15 @@ Trial thin_plate(const std::vector<double>& u, const std::vector<double>& v, con
   rhs.head(n) = y;
   const Eigen::VectorXd c = inv * rhs;
   if (!c.allFinite()) return t;
-  double ss = 0, mx = 0;
+  double ss = 0, mx = 0, h = 0;
   for (int i = 0; i < n; ++i) {
     const double e = c(i) / inv(i, i);
     ss += e * e;
     mx = std::max(mx, std::abs(e));
+    h += 1.0 - lambda / wt(i) * inv(i, i);  // s(x_i) = y_i - (lambda / w_i) c_i
   }
   t.loo_rms = std::sqrt(ss / n);
+  t.leverage = h / n;
   t.loo_max = mx;
   t.w = c.head(n);
   t.poly = c.tail(3);
@@ -79,9 +82,10 @@ Trial polynomial(const std::vector<double>& u, const std::vector<double>& v, con
   if (qr.rank() < m) return t;  // e.g. only two theta values: u^2 is not identifiable
   const Eigen::VectorXd beta = qr.solve(sw.cwiseProduct(y));
   const Eigen::MatrixXd G = (Xw.transpose() * Xw).inverse();
-  double ss = 0, mx = 0;
+  double ss = 0, mx = 0, hsum = 0;
   for (int i = 0; i < n; ++i) {
     const double h = wt(i) * X.row(i).dot(G * X.row(i).transpose());
+    hsum += h;
     const double r = y(i) - X.row(i).dot(beta);
     if (1 - h < 1e-10) return Trial{};
     const double e = r / (1 - h);
@@ -90,6 +94,7 @@ Trial polynomial(const std::vector<double>& u, const std::vector<double>& v, con
   }
   t.loo_rms = std::sqrt(ss / n);
   t.loo_max = mx;
+  t.leverage = hsum / n;
   t.poly = beta;
   return t;
 }
@@ -181,6 +186,7 @@ Surrogate fit_surrogate(const std::vector<double>& theta, const std::vector<doub
   s.lambda_ = best_c.lambda;
   s.loo_rms_ = best.loo_rms;
   s.loo_max_ = best.loo_max;
+  s.leverage_ = best.leverage;
   s.w_ = best.w;
   s.poly_ = best.poly;
   return s;

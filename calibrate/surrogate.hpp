@@ -29,6 +29,9 @@ class Surrogate {
   double lambda() const { return lambda_; }
   double loo_rms() const { return loo_rms_; }         // RMS of the LOO residuals, metric units
   double loo_max() const { return loo_max_; }         // largest |LOO residual|
+  // Mean leverage (trace of the hat matrix / points, 1 for an interpolant): the
+  // share of a point mean's noise variance the surface carries at the points.
+  double mean_leverage() const { return leverage_; }
   int points() const { return static_cast<int>(u_.size()); }
   const std::vector<SurrogateCandidate>& candidates() const { return candidates_; }
   std::string describe() const;  // e.g. "thin-plate spline (lambda 1e-3), LOO RMS 0.21 over 30 points"
@@ -41,7 +44,7 @@ class Surrogate {
   double v(double eta) const { return (eta - box_.eta_lo) / (box_.eta_hi - box_.eta_lo); }
 
   SurrogateKind kind_ = SurrogateKind::thin_plate;
-  double lambda_ = 0, loo_rms_ = 0, loo_max_ = 0;
+  double lambda_ = 0, loo_rms_ = 0, loo_max_ = 0, leverage_ = 1;
   Box box_;                        // normalisation: the box maps to the unit square
   std::vector<double> u_, v_;      // centres (normalised)
   Eigen::VectorXd w_, poly_;       // spline weights, polynomial coefficients

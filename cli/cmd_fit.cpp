@@ -20,6 +20,12 @@ std::string g(double v, int digits = 4) {
   return b;
 }
 
+// What the sigma is made of: the surrogate's error, and the target's own when given.
+std::string sigma_note(const calibrate::TargetFit& t) {
+  if (!t.sigma_given) return "  (sigma: surrogate error)";
+  return "  (sigma: " + g(t.lab_sigma, 3) + " given (+) " + g(t.surrogate_sigma, 3) + " surrogate error)";
+}
+
 void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_t fit_id) {
   const auto& r = cal.result;
   out << "fit " << fit_id << " (" << r.method << ")\n";
@@ -29,7 +35,9 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
   for (std::size_t k = 0; k < cal.models.size(); ++k) {
     const auto& m = cal.models[k];
     out << "  " << m.metric << " (job " << m.job << "): " << m.surrogate.describe() << ", " << cal.surfaces[k].holes()
-        << " hole(s), replica se " << g(m.replica_se, 3) << "\n";
+        << " hole(s), replica se "
+        << (m.replica_se > 0 ? g(m.replica_se, 3) : std::string("unknown (one replica a point: LOO alone measures the noise)"))
+        << "\n";
   }
   if (r.ok) {
     out << "best: theta = " << g(r.theta) << " deg, eta = " << g(r.eta) << " (misfit " << g(r.misfit, 3) << ")\n";
@@ -42,7 +50,7 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
   for (const auto& t : r.targets) {
     std::snprintf(line, sizeof line, "  %-12s %10s %8s %10s %10s%s\n", t.metric.c_str(), g(t.target).c_str(),
                   g(t.sigma, 3).c_str(), r.ok ? g(t.predicted).c_str() : "-", r.ok ? g(t.residual, 3).c_str() : "-",
-                  t.sigma_given ? "" : "  (sigma from replica spread and LOO error)");
+                  sigma_note(t).c_str());
     out << line;
   }
   if (r.ok)
@@ -64,7 +72,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<Args>();
   cmd->add_option("--target", a->targets, "METRIC=VALUE (phi_peak, phi_cv, phi_diff, repose, or a stored metric); repeatable")
       ->required();
-  cmd->add_option("--sigma", a->sigmas, "METRIC=SIGMA: the target's uncertainty (default: replica spread and surrogate error)");
+  cmd->add_option("--sigma", a->sigmas, "METRIC=SIGMA: the target's own uncertainty (e.g. the laboratory's), added in quadrature to the surrogate's error (default: 0, an exact target)");
   cmd->add_option("--job", a->jobs, "job(s) to read (default: the job storing each metric); repeatable");
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();

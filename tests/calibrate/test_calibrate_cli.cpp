@@ -117,7 +117,12 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   ASSERT_EQ(r.rc, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["fit_id"], 2);
-  EXPECT_DOUBLE_EQ(j["targets"][0]["sigma"].get<double>(), 0.5);
+  // The stated sigma is the target's own; the surrogate's error adds to it.
+  const auto& t0 = j["targets"][0];
+  EXPECT_DOUBLE_EQ(t0["lab_sigma"].get<double>(), 0.5);
+  const double ss = t0["surrogate_sigma"].get<double>();
+  EXPECT_GT(ss, 0.0);
+  EXPECT_NEAR(t0["sigma"].get<double>(), std::sqrt(0.25 + ss * ss), 1e-12);
 }
 
 TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
@@ -158,6 +163,46 @@ TEST(CalibrateCli, SingleTargetWarns) {
   const auto r = run_demcal({"fit", "--target", "phi_peak=35"}, d.path.string());
   EXPECT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("warning: one target for two unknowns"), std::string::npos) << r.out;
+}
+
+TEST(CalibrateCli, FitRefusesWhatCannotGiveAnHonestRegion) {
+  TempDir d;
+  const std::string dir = d.path.string();
+  {
+    db::Store s(d.file("demcal.db"));
+    store_fake_job(s, "two", {20, 30}, kEt, 2, 0.3, 7);
+  }
+  // Two theta values: a plane along theta, and a LOO error blind to its curvature.
+  auto r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_cv=28"}, dir);
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--job: job \"two\" has phi_peak at 2 theta value(s) (20, 30)"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("at least 3 of each"), std::string::npos) << r.err;
+  // phi_diff with both of its parts would count their residuals twice.
+  TempDir d2;
+  make_db(d2, false);
+  r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_cv=28", "--target", "phi_diff=7"}, d2.path.string());
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--target: phi_diff is phi_peak - phi_cv"), std::string::npos) << r.err;
+}
+
+TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
+  TempDir d;
+  {
+    db::Store s(d.file("demcal.db"));
+    std::vector<FakePoint> failed;
+    for (double e : kEt) failed.push_back({40, e});  // the whole theta = 40 row failed
+    failed.push_back({25, 0.3});
+    store_fake_job(s, "grid", kTh, kEt, 2, 0.3, 7, failed);
+  }
+  const double th = 26, et = 0.27;  // near the failed point (25, 0.3)
+  auto r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
+                       "phi_cv=" + std::to_string(phi_cv_fn(th, et))},
+                      d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("box: theta 15 .. 35 deg"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("warning: job grid has no phi_peak above theta 35"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("at a corner (theta 25, eta 0.3)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("phi_peak and phi_cv have no value at a corner"), std::string::npos) << r.out;
 }
 
 TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
