@@ -1,9 +1,11 @@
 #include "common.hpp"
 
 #include "db/store.hpp"
+#include "jobs/hdf5_writer.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/series_plot.hpp"
 
+#include <filesystem>
 #include <iostream>
 
 namespace demcal::cli {
@@ -34,6 +36,15 @@ void add_plot(CLI::App& app, int& exit_code) {
         if (kind == "hdf5") h5 = path;
       if (h5.empty())
         throw jobs::JobError("TASK", "task " + std::to_string(a->task) + " has no stored series (status " + task->status + ")");
+      // The file must be this task's: a file at that path written for another task
+      // (an output folder shared with another database) would plot the wrong run.
+      if (std::filesystem::exists(h5)) {
+        const std::string key = jobs::read_task_key(h5);
+        if (!key.empty() && key != task->key)
+          throw std::runtime_error("the HDF5 file " + h5 + " was written for another task (key " + key + ", task " +
+                                   std::to_string(a->task) + " has " + task->key +
+                                   "): another run overwrote it; run the task again into a folder of its own");
+      }
       jobs::PlotRequest r{h5, a->series, a->x, a->y, a->out, "task " + std::to_string(a->task) + ": " + a->series};
       jobs::plot_series(r);
       std::cout << a->out << "\n";

@@ -7,6 +7,9 @@
 #include <H5Cpp.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
 
@@ -96,16 +99,44 @@ void SnapshotObserver::on_snapshot(const std::string& label, double time, const 
   snapshots.push_back(std::move(s));
 }
 
-void write_task_hdf5(const std::string& path, const std::string& scene, const nlohmann::json& params,
+void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nlohmann::json& params,
                      const std::vector<engine::Series>& series, const std::vector<Snapshot>& snapshots) {
   H5::Exception::dontPrint();
-  H5::H5File f(path, H5F_ACC_TRUNC);
-  string_attr(f, "scene", scene);
-  string_attr(f, "params", params.dump());
-  double_attr(f, "physics_version", kPhysicsVersion);
-  H5::Group root = f.createGroup("series");
-  for (const auto& s : series) write_series(root, s);
-  for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);
+  // Written beside the final name and renamed when whole: a run stopped mid-write
+  // (or a full disk) leaves no file at the recorded path that looks valid.
+  const std::string part = path + ".part";
+  try {
+    H5::H5File f(part, H5F_ACC_TRUNC);
+    string_attr(f, "scene", info.scene);
+    string_attr(f, "params", params.dump());
+    string_attr(f, "task_key", info.task_key);
+    double_attr(f, "task_id", static_cast<double>(info.task_id));
+    double_attr(f, "physics_version", kPhysicsVersion);
+    H5::Group root = f.createGroup("series");
+    for (const auto& s : series) write_series(root, s);
+    for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);
+    root.close();
+    f.close();  // a failed flush throws here, not silently in a destructor
+  } catch (const H5::Exception& e) {
+    std::remove(part.c_str());
+    throw std::runtime_error("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
+                             " (is the disk full, or the folder not writable?)");
+  }
+  if (std::rename(part.c_str(), path.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    std::remove(part.c_str());
+    throw std::runtime_error("cannot move the HDF5 file into place at " + path + ": " + why);
+  }
+}
+
+std::string read_task_key(const std::string& path) {
+  H5::Exception::dontPrint();
+  try {
+    H5::H5File f(path, H5F_ACC_RDONLY);
+    return f.attrExists("task_key") ? read_string_attr(f, "task_key") : std::string();
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+  }
 }
 
 engine::Series read_series(const std::string& path, const std::string& name) {

@@ -7,6 +7,7 @@
 // scenes' snapshot points are listed in engine/observer.hpp.
 #include "engine/observer.hpp"
 
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -30,10 +31,21 @@ class SnapshotObserver : public engine::Observer {
   bool keep_;
 };
 
-// Root attributes: scene, params (JSON) and physics_version; each series column and
-// snapshot dataset carries a "units" attribute (SI; "1" for a pure number).
-void write_task_hdf5(const std::string& path, const std::string& scene, const nlohmann::json& params,
+// Which task a file belongs to (root attributes).
+struct TaskFileInfo {
+  std::string scene;
+  std::string task_key;  // the task's key in the database (db::task_key)
+  std::int64_t task_id = 0;
+};
+
+// Root attributes: scene, params (JSON), task_key, task_id and physics_version; each
+// series column and snapshot dataset carries a "units" attribute (SI; "1" for a pure
+// number). Written to `path`.part and renamed into place when whole; throws
+// std::runtime_error naming the path and the reason when it cannot be written.
+void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nlohmann::json& params,
                      const std::vector<engine::Series>& series, const std::vector<Snapshot>& snapshots);
+// The task key a file was written for ("" for a file from before keys were written).
+std::string read_task_key(const std::string& path);
 
 // Reads one series back (for plotting); throws std::runtime_error when absent.
 engine::Series read_series(const std::string& path, const std::string& name);

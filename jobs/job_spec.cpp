@@ -142,7 +142,7 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
       if (t.params.contains(a)) where += (where.empty() ? "" : ", ") + a + "=" + t.params[a].dump();
     std::ostringstream os;
     os.precision(4);
-    os << "task " << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt = " << f.dt
+    os << "#" << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt = " << f.dt
        << " s exceeds the critical step " << f.dt_critical << " s of the " << f.mode
        << (f.refused ? "; the engine will refuse it"
                      : "; allow_unstable_dt runs it anyway, and the instability detector judges it");
@@ -185,7 +185,7 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     }
     Task t;
     t.index = i;
-    t.key = task_key(scene.name, params[i]);
+    t.key = task_key(scene.name, params[i], job.snapshots);
     t.params = std::move(params[i]);
     job.tasks.push_back(std::move(t));
   }

@@ -141,6 +141,7 @@ int serve(const MpiOptions& options) {
       t.params = j.at("params");
       t.threads = j.at("threads").get<int>();
       t.snapshots = j.at("snapshots").get<bool>();
+      t.task_key = j.at("task_key").get<std::string>();
       t.h5_path = j.at("h5_path").get<std::string>();
       t.result_path = (std::filesystem::temp_directory_path() /
                        ("demcal-rank" + std::to_string(rank) + "-" + std::to_string(getpid()) + "-task" +
@@ -322,7 +323,8 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
                             {"params", nlohmann::json::parse(row.params_json)},
                             {"threads", threads},
                             {"snapshots", job.snapshots},
-                            {"h5_path", (dir / (std::to_string(row.id) + ".h5")).string()}};
+                            {"task_key", row.key},
+                            {"h5_path", (dir / task_file_name(row.id, row.key)).string()}};
         send(r, kTagTask, t.dump());
         k.task = std::move(row);
         k.task_start = k.last_seen = Clock::now();

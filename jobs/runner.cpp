@@ -127,12 +127,13 @@ std::string Runner::describe_task(std::size_t index, std::int64_t task_id) const
 void Runner::launch(const db::TaskRow& row) {
   WorkerTask t;
   t.task_id = row.id;
+  t.task_key = row.key;
   t.index = static_cast<std::size_t>(row.index);
   t.scene = row.scene;
   t.params = nlohmann::json::parse(row.params_json);
   t.threads = threads_;
   t.snapshots = job_.snapshots;
-  t.h5_path = (dir_ / (std::to_string(row.id) + ".h5")).string();
+  t.h5_path = (dir_ / task_file_name(row.id, row.key)).string();
   t.result_path = (dir_ / (".task-" + std::to_string(row.id) + ".result.json")).string();
   std::filesystem::remove(t.result_path);
   std::cout.flush();

@@ -47,7 +47,7 @@ nlohmann::json run_scene(const WorkerTask& t) {
   if (!scene) throw std::runtime_error("unknown scene " + t.scene);
   SnapshotObserver obs(t.snapshots);
   const SceneOutput r = scene->run(t.params, RunContext{t.threads, &obs});
-  write_task_hdf5(t.h5_path, t.scene, t.params, r.series, obs.snapshots);
+  write_task_hdf5(t.h5_path, TaskFileInfo{t.scene, t.task_key, t.task_id}, t.params, r.series, obs.snapshots);
   out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
   nlohmann::json metrics = nlohmann::json::array();
   for (const auto& [name, value] : r.metrics) metrics.push_back({name, encode(value)});
@@ -68,6 +68,10 @@ nlohmann::json run_scene(const WorkerTask& t) {
 
 }  // namespace
 
+std::string task_file_name(std::int64_t task_id, const std::string& task_key) {
+  return std::to_string(task_id) + (task_key.empty() ? "" : "-" + task_key.substr(0, 8)) + ".h5";
+}
+
 int run_worker(const WorkerTask& t) {
   test_abort_hook(t.index);
   const auto t0 = std::chrono::steady_clock::now();
@@ -83,6 +87,7 @@ int run_worker(const WorkerTask& t) {
   {
     std::ofstream f(tmp, std::ios::trunc);
     f << out.dump();
+    f.close();  // the write reaches the disk (or fails) here, before the check
     if (!f) return 3;
   }
   // rename is atomic: the parent sees a whole result or none.

@@ -14,6 +14,7 @@ namespace demcal::jobs {
 
 struct WorkerTask {
   std::int64_t task_id = 0;
+  std::string task_key;   // written into the HDF5 file: which task it belongs to
   std::size_t index = 0;  // position in the job's expansion (for the test hook)
   std::string scene;
   nlohmann::json params;
@@ -22,6 +23,10 @@ struct WorkerTask {
   std::string h5_path;
   std::string result_path;
 };
+
+// A task's HDF5 file name, "<id>-<first 8 of its key>.h5": task ids are per database,
+// so two databases sharing an output folder must not write the same name.
+std::string task_file_name(std::int64_t task_id, const std::string& task_key);
 
 // Runs the task and writes result_path (atomically, via rename). Returns the
 // process exit status to use: 0 when a result was written.

@@ -496,18 +496,22 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     const long est_steps = static_cast<long>(std::ceil(cfg.axial_strain / dstrain));
     const long budget = est_steps + est_steps / 10 + static_cast<long>(t_ramp / world.dt()) + 100;
     double e1 = 0.0;
-    while (e1 < cfg.axial_strain - 1e-12) {
+    // The end is judged with the sampling's tolerance: otherwise a sample landing half
+    // a step short of the target was followed by one more step and a near-duplicate
+    // last row and frame, in some replicas and not others.
+    const double end = cfg.axial_strain - 0.5 * dstrain;
+    while (e1 < end) {
       if (world.step_count() - s0 > budget)
         throw StageFailed("shear did not reach the target axial strain within " + std::to_string(budget) + " steps");
       rig.servo_faces(0, 3, shear_gains);
       set_axial_speed();
       world.step();
       e1 = (L0[2] - rig.length(2)) / L0[2];
-      if (e1 >= next - 0.5 * dstrain || e1 >= cfg.axial_strain - 1e-12) {
+      if (e1 >= next - 0.5 * dstrain || e1 >= end) {
         sample();
         next += cfg.sample_strain;
         if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
-        if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < cfg.axial_strain - 1e-12) {
+        if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < end) {
           char label[32];
           std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
           obs->on_snapshot(label, world.time(), world.particles());

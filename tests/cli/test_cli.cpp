@@ -1,5 +1,8 @@
 #include "cli_util.hpp"
 
+#include "jobs/hdf5_writer.hpp"
+#include "jobs/worker.hpp"
+
 #include <H5Cpp.h>
 
 using namespace demcal::test;
@@ -72,7 +75,7 @@ TEST(Cli, RunQueryStatusAndResume) {
   ASSERT_EQ(before.size(), 3u);
   for (const auto& t : before) {
     EXPECT_EQ(t.status, "done");
-    EXPECT_TRUE(fs::exists(d.path / "demcal-out" / "small" / (std::to_string(t.id) + ".h5")));
+    EXPECT_TRUE(fs::exists(d.path / "demcal-out" / "small" / demcal::jobs::task_file_name(t.id, t.key)));
   }
 
   r = run_demcal({"query", "--job", "small", "--where", "dt_factor=0.1", "--format", "json"}, d.path.string());
@@ -205,7 +208,9 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
   const auto plain = tasks_of(d.file("demcal.db"), "plain");
   ASSERT_EQ(snap.size(), 1u);
   ASSERT_EQ(plain.size(), 1u);
-  H5::H5File f((d.path / "demcal-out" / "snap" / (std::to_string(snap[0].id) + ".h5")).string(), H5F_ACC_RDONLY);
+  const std::string snap_file = (d.path / "demcal-out" / "snap" / demcal::jobs::task_file_name(snap[0].id, snap[0].key)).string();
+  EXPECT_EQ(demcal::jobs::read_task_key(snap_file), snap[0].key);  // the file says whose it is
+  H5::H5File f(snap_file, H5F_ACC_RDONLY);
   for (const auto& [step, label] : {std::pair<const char*, const char*>{"Step#0", "initial"}, {"Step#1", "final"}}) {
     ASSERT_TRUE(f.nameExists(step)) << step;
     H5::Group g = f.openGroup(step);
@@ -233,16 +238,33 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
   EXPECT_EQ(text(f.openDataSet("series/energy/time"), "units"), "s");
   EXPECT_EQ(text(f.openDataSet("series/energy/kinetic"), "units"), "J");
   EXPECT_EQ(text(f.openDataSet("Step#0/vx"), "units"), "m/s");
-  H5::H5File p((d.path / "demcal-out" / "plain" / (std::to_string(plain[0].id) + ".h5")).string(), H5F_ACC_RDONLY);
+  H5::H5File p((d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain[0].id, plain[0].key)).string(), H5F_ACC_RDONLY);
   EXPECT_FALSE(p.nameExists("Step#0"));
   EXPECT_TRUE(p.nameExists("series"));
+  p.close();
+  // Snapshots asked for later: the plain job's task is run again (not reused from a
+  // file without any), and its new file holds them.
+  json again = json::parse(collision_job("plain", {0.05}));
+  again["snapshots"] = true;
+  write(d.file("plain-snap.json"), again.dump());
+  const Result r = run_demcal({"run", "plain-snap.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("1 done (0 reused)"), std::string::npos) << r.err;
+  const auto plain2 = tasks_of(d.file("demcal.db"), "plain");
+  ASSERT_EQ(plain2.size(), 1u);
+  EXPECT_NE(plain2[0].key, plain[0].key);
+  H5::H5File q((d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain2[0].id, plain2[0].key)).string(),
+               H5F_ACC_RDONLY);
+  EXPECT_TRUE(q.nameExists("Step#0"));
 }
 
 TEST(Cli, PlotDrawsPngAndSvg) {
   TempDir d;
   write(d.file("j.json"), collision_job("plot", {0.1}));
   ASSERT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
-  const auto id = std::to_string(tasks_of(d.file("demcal.db"))[0].id);
+  const auto task = tasks_of(d.file("demcal.db"))[0];
+  const auto id = std::to_string(task.id);
+  const fs::path file = d.path / "demcal-out" / "plot" / demcal::jobs::task_file_name(task.id, task.key);
   Result r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total,kinetic", "--out", "e.png"},
                     d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
@@ -268,7 +290,20 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--out: the folder"), std::string::npos) << r.err;
   EXPECT_EQ(r.err.find("gnuplot"), std::string::npos) << r.err;
-  fs::remove(d.path / "demcal-out" / "plot" / (id + ".h5"));  // the artifact went missing after the run
+  // A file at the task's path written for another task (a database sharing the output
+  // folder) is refused, not plotted.
+  {
+    const std::string other = d.file("other.h5");
+    demcal::jobs::write_task_hdf5(other, {"collision", "0123456789abcdef", task.id}, nlohmann::json::object(), {}, {});
+    fs::copy_file(file, d.file("mine.h5"));
+    fs::copy_file(other, file, fs::copy_options::overwrite_existing);
+    r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "o.png"}, d.path.string());
+    EXPECT_EQ(r.rc, 1);
+    EXPECT_NE(r.err.find("was written for another task (key 0123456789abcdef"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(d.file("o.png")));
+    fs::copy_file(d.file("mine.h5"), file, fs::copy_options::overwrite_existing);
+  }
+  fs::remove(file);  // the artifact went missing after the run
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "g.png"}, d.path.string());
   EXPECT_EQ(r.rc, 1);
   EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;

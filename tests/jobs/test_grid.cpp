@@ -83,7 +83,7 @@ TEST(Grid, AStepPastTheCriticalOneIsNotedBeforeTheRun) {
   const Job job = parse(j);
   ASSERT_EQ(job.tasks.size(), 2u) << "legal: a stability study charts where the method fails";
   ASSERT_EQ(job.notes.size(), 1u);
-  EXPECT_NE(job.notes[0].find("task 1 (dt_factor=5.0)"), std::string::npos) << job.notes[0];
+  EXPECT_NE(job.notes[0].find("#1 (dt_factor=5.0)"), std::string::npos) << job.notes[0];
   EXPECT_NE(job.notes[0].find("exceeds the critical step"), std::string::npos) << job.notes[0];
   EXPECT_NE(job.notes[0].find("normal mode"), std::string::npos) << job.notes[0];
   EXPECT_NE(job.notes[0].find("will refuse it"), std::string::npos) << job.notes[0];

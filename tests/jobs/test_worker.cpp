@@ -1,10 +1,14 @@
 // The worker's result file, read back by the runner: what a task process leaves
 // behind is all the parent learns of it.
+#include "../temp_dir.hpp"
+#include "jobs/hdf5_writer.hpp"
 #include "jobs/worker.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <stdexcept>
 
 using demcal::jobs::parse_worker_result;
 
@@ -45,3 +49,35 @@ TEST(WorkerResult, TruncatedOrIncompleteFileIsNoResult) {
   EXPECT_FALSE(parse_worker_result(""));
   EXPECT_FALSE(parse_worker_result(R"({"status": "done", "wall_s": 1, "metrics": [[1, 2]], "artifacts": []})"));
 }
+
+namespace demcal::jobs {
+namespace {
+
+TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
+  demcal::test::TempDir d;
+  engine::Series s;
+  s.name = "energy";
+  s.columns = {"time", "total"};
+  s.units = {"s", "J"};
+  s.rows = {{0.0, 1.0}, {1.0, 1.0}};
+  // Written whole: the key and id are in it, no .part is left beside it.
+  const std::string ok = d.file("1-abcdef01.h5");
+  write_task_hdf5(ok, {"collision", "abcdef0123456789", 1}, {{"seed", 1}}, {s}, {});
+  EXPECT_EQ(read_task_key(ok), "abcdef0123456789");
+  EXPECT_EQ(read_series(ok, "energy").rows.size(), 2u);
+  EXPECT_FALSE(std::filesystem::exists(ok + ".part"));
+  // The file cannot be made (a folder in the way of its .part): an exception naming
+  // the path, not an abort, and no file at the path.
+  const std::string bad = d.file("2-abcdef02.h5");
+  std::filesystem::create_directories(bad + ".part");
+  try {
+    write_task_hdf5(bad, {"collision", "abcdef0223456789", 2}, {}, {s}, {});
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot write the HDF5 file " + bad), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(bad));
+}
+
+}  // namespace
+}  // namespace demcal::jobs
