@@ -23,6 +23,7 @@ struct RunArgs {
   bool shard_given = false;
   int workers = 0;
   bool retry_failed = false;
+  bool requeue_running = false;
   bool mpi = false;
   double mpi_timeout = 60;
 };
@@ -41,6 +42,7 @@ int run(const RunArgs& a) {
   db::Store store(a.db);
   opt.workers = a.workers;
   opt.retry_failed = a.retry_failed;
+  opt.requeue_running = a.requeue_running;
   opt.terminal = isatty(STDERR_FILENO) != 0;
   opt.log = &std::cerr;
   opt.shard = shard;
@@ -56,9 +58,16 @@ int run(const RunArgs& a) {
               << " --metrics all, or --format csv or json)\n";
   std::cerr << "job " << job.name << (shard.active() ? " shard " + shard.label() : std::string()) << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
             << s.unfinished << " unfinished, of " << s.total << "\n";
+  // The hint repeats what selects this run's tasks and files: without --shard it
+  // would run the whole grid into a shard's part.
+  const std::string same = " --db " + a.db + (shard.active() ? " --shard " + shard.label() : std::string()) +
+                           (a.out.empty() ? std::string() : " --out " + a.out);
   if (s.failed > 0 && !s.interrupted)
     std::cerr << "why they failed: demcal status --db " << a.db << " --job " << job.name
-              << "; to run them again: demcal run " << a.job << " --db " << a.db << " --retry-failed\n";
+              << "; to run them again: demcal run " << a.job << same << " --retry-failed\n";
+  if (s.unfinished > 0 && !s.interrupted)
+    std::cerr << "unfinished tasks are held by another runner (demcal status --db " << a.db
+              << "); if none is at work on them any more: demcal run " << a.job << same << " --requeue-running\n";
   if (s.interrupted || s.failed > 0 || s.unfinished > 0) return kRuntime;
   return kOk;
 }
@@ -73,6 +82,9 @@ void add_run(CLI::App& app, int& exit_code) {
   cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->check(CLI::Range(1, 4096));
   cmd->add_option("--out", a->out, "output directory (default: demcal-out/ next to the database)");
   cmd->add_flag("--retry-failed", a->retry_failed, "run the job's failed tasks again");
+  cmd->add_flag("--requeue-running", a->requeue_running,
+                "put the job's running tasks back in the queue first: their runner is gone (a runner on another "
+                "host that stopped beating is found out by itself after 120 s)");
   cmd->add_option("--format", a->format, "results on stdout: table, csv or json")->capture_default_str();
   auto* shard_opt = cmd->add_option("--shard", a->shard,
                   "run only shard i of N (1-based): the tasks whose expansion index k has k mod N = i-1; "

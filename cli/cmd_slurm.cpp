@@ -34,7 +34,8 @@ void check_token(const std::string& option, const std::string& value, const char
 }
 
 std::string script(const SlurmArgs& a, const jobs::Job& job) {
-  const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : a.demcal;
+  // Absolute: the script changes into the database's folder before running it.
+  const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
   const fs::path db = fs::absolute(a.db);
   const fs::path workdir = db.parent_path();
   const fs::path parts = a.parts.empty() ? workdir / "parts" : fs::absolute(a.parts);
@@ -100,6 +101,16 @@ int slurm(SlurmArgs a) {
   const jobs::Job job = jobs::load_job_file(a.job);  // the job must be valid before anything is written
   if (a.out.empty()) a.out = "demcal-" + job.name + ".slurm.sh";
   require_writable_file("--out", a.out);
+  // The script runs in the database's folder and writes the parts beside it: both
+  // must exist when it runs, and a #SBATCH line cannot carry a path with blanks.
+  require_writable_file("--db", a.db);
+  const fs::path parts = a.parts.empty() ? fs::absolute(a.db).parent_path() / "parts" : fs::absolute(a.parts);
+  if (parts.string().find_first_of(" \t") != std::string::npos)
+    throw jobs::JobError(a.parts.empty() ? "--db" : "--parts",
+                         "the parts folder " + parts.string() +
+                             " has a blank in its path, which a #SBATCH --output line cannot carry; choose another");
+  if (!a.demcal.empty() && !fs::exists(a.demcal))
+    throw jobs::JobError("--demcal", "no such file: " + fs::absolute(a.demcal).string());
   const std::string text = script(a, job);
   {
     std::ofstream f(a.out, std::ios::trunc);

@@ -21,7 +21,10 @@ int pragma_int(Connection& c, const char* sql) {
   return s.step() ? static_cast<int>(s.int64(0)) : 0;
 }
 
-// A part must be an existing demcal database of exactly this schema version.
+// A part must be an existing demcal database of a schema version whose merged tables
+// are this one's: versions 1 and 2 differ only in the runners' heartbeats, which a
+// merge does not carry (a part's running tasks arrive as pending).
+constexpr int kOldestMergeable = 1;
 void check_part(const std::string& part, const std::string& into) {
   struct stat st {};
   if (::stat(part.c_str(), &st) != 0) throw DbError(part + ": no such file; nothing merged", true);
@@ -39,9 +42,9 @@ void check_part(const std::string& part, const std::string& into) {
   const int app = pragma_int(c, "PRAGMA application_id");
   const int version = pragma_int(c, "PRAGMA user_version");
   if (app != kApplicationId) throw DbError(part + ": not a demcal database (no demcal schema); nothing merged", true);
-  if (version != kSchemaVersion)
-    throw DbError(part + ": schema version " + std::to_string(version) + ", but this demcal merges version " +
-                      std::to_string(kSchemaVersion) +
+  if (version < kOldestMergeable || version > kSchemaVersion)
+    throw DbError(part + ": schema version " + std::to_string(version) + ", but this demcal merges versions " +
+                      std::to_string(kOldestMergeable) + " to " + std::to_string(kSchemaVersion) +
                       " (an older one is migrated by any `demcal run --db " + part + "` of this demcal); nothing merged",
                   true);
 }

@@ -57,6 +57,13 @@ CREATE TABLE fits(
   method TEXT NOT NULL,
   result_json TEXT NOT NULL);
 )sql",
+    // 1 -> 2: runners' heartbeats, so that a run on another host can tell a runner
+    // that died there (its tasks left 'running') from one still at work.
+    R"sql(
+CREATE TABLE runners(
+  token TEXT PRIMARY KEY,
+  last_seen REAL NOT NULL);
+)sql",
 };
 static_assert(sizeof(kMigrations) / sizeof(kMigrations[0]) == kSchemaVersion, "one migration per version");
 

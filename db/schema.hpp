@@ -7,7 +7,7 @@
 
 namespace demcal::db {
 
-constexpr int kSchemaVersion = 1;
+constexpr int kSchemaVersion = 2;
 constexpr int kApplicationId = 0x64656d63;  // "demc"
 
 // Inspects an existing file read-only and throws DbError(bad_input) when it is not

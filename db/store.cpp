@@ -240,6 +240,37 @@ int Store::requeue_dead(const std::function<bool(const std::string&)>& alive) {
   return n;
 }
 
+void Store::beat(const std::string& worker) {
+  conn_.prepare("INSERT INTO runners(token, last_seen) VALUES(?, ?)"
+                " ON CONFLICT(token) DO UPDATE SET last_seen = excluded.last_seen")
+      .bind(1, worker).bind(2, unix_now()).run();
+}
+
+std::optional<double> Store::last_seen(const std::string& worker) {
+  Statement s = conn_.prepare("SELECT last_seen FROM runners WHERE token = ?");
+  s.bind(1, worker);
+  if (!s.step()) return std::nullopt;
+  return s.real(0);
+}
+
+std::vector<std::pair<std::string, int>> Store::running_holders(const std::string& job) {
+  Statement s = conn_.prepare(
+      "SELECT t.worker, count(*) FROM job_tasks jt JOIN jobs j ON j.id = jt.job_id JOIN tasks t ON t.id = jt.task_id"
+      " WHERE j.name = ? AND t.status = 'running' GROUP BY t.worker ORDER BY t.worker");
+  s.bind(1, job);
+  std::vector<std::pair<std::string, int>> out;
+  while (s.step()) out.emplace_back(s.text(0), static_cast<int>(s.int64(1)));
+  return out;
+}
+
+int Store::requeue_running(std::int64_t job_id) {
+  conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
+                " error = 're-queued by --requeue-running' WHERE status = 'running'"
+                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
+      .bind(1, job_id).run();
+  return conn_.changes();
+}
+
 int Store::reset_failed(std::int64_t job_id) {
   conn_.prepare("UPDATE tasks SET status = 'pending' WHERE status = 'failed'"
                 " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")

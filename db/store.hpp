@@ -80,6 +80,15 @@ class Store {
   // Running tasks whose worker `alive` says is gone go back to pending. Returns count.
   int requeue_dead(const std::function<bool(const std::string& worker)>& alive);
   int reset_failed(std::int64_t job_id);
+  // The job's running tasks back to pending, whoever holds them (the user says no
+  // runner is at work on them). Returns count.
+  int requeue_running(std::int64_t job_id);
+  // A runner's heartbeat: `worker` (its token) is alive now. last_seen: when it last
+  // beat (unix seconds), nullopt if it never did.
+  void beat(const std::string& worker);
+  std::optional<double> last_seen(const std::string& worker);
+  // Workers holding running tasks of `job`, with how many each.
+  std::vector<std::pair<std::string, int>> running_holders(const std::string& job);
 
   StatusCounts counts(const std::string& job = "");
   std::vector<std::pair<std::string, double>> metrics(std::int64_t task_id);

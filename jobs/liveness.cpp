@@ -1,5 +1,10 @@
 #include "liveness.hpp"
 
+#include "db/store.hpp"
+
+#include <chrono>
+#include <cmath>
+
 #include <fstream>
 #include <sstream>
 #include <unistd.h>
@@ -29,7 +34,38 @@ bool proc_stat(long pid, char& state, std::string& start) {
   return true;
 }
 
+std::string host_of(const std::string& token) {
+  const auto a = token.rfind(':');
+  const auto b = a == std::string::npos || a == 0 ? std::string::npos : token.rfind(':', a - 1);
+  return b == std::string::npos ? std::string() : token.substr(0, b);
+}
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
 }  // namespace
+
+bool holder_alive(db::Store& store, const std::string& token) {
+  if (host_of(token) == host() || host_of(token).empty()) return runner_alive(token);
+  const auto seen = store.last_seen(token);
+  return !seen || now_s() - *seen < kRunnerLeaseS;
+}
+
+int requeue_dead_runners(db::Store& store) {
+  return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w); });
+}
+
+std::string describe_holder(db::Store& store, const std::string& token) {
+  if (host_of(token) == host()) return token + " (this host)";
+  const auto seen = store.last_seen(token);
+  if (!seen)
+    return token + " (another host, no heartbeat: a demcal from before heartbeats; if it is gone, `demcal run JOB "
+                   "--requeue-running` puts its tasks back)";
+  const double ago = now_s() - *seen;
+  return token + " (another host, last seen " + std::to_string(static_cast<long>(std::lround(ago))) +
+         " s ago; its tasks are re-queued once it is silent for " + std::to_string(static_cast<long>(kRunnerLeaseS)) + " s)";
+}
 
 std::string runner_token() {
   char state = 0;

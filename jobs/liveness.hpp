@@ -4,11 +4,28 @@
 // alive; a zombie counts as dead.
 #include <string>
 
+namespace demcal::db {
+class Store;
+}
+
 namespace demcal::jobs {
+
+// Runners beat every kRunnerBeatS into the database; one on another host that has
+// been silent for kRunnerLeaseS is taken for dead and its running tasks re-queued.
+constexpr double kRunnerBeatS = 10.0;
+constexpr double kRunnerLeaseS = 120.0;
 
 std::string runner_token();  // this process
 // False when the token names a process on this host that is gone; tokens from
 // other hosts are assumed alive (we cannot tell).
 bool runner_alive(const std::string& token);
+// Alive as far as this process can tell: a runner on this host by runner_alive; one
+// on another host by its heartbeat in `store` (silent for kRunnerLeaseS: dead; a
+// runner that never beat, from a demcal before heartbeats: assumed alive).
+bool holder_alive(db::Store& store, const std::string& token);
+// Running tasks of runners holder_alive finds dead go back to pending; returns how many.
+int requeue_dead_runners(db::Store& store);
+// "node01:30457:... (another host, last seen 42 s ago)": for a run waiting on a holder.
+std::string describe_holder(db::Store& store, const std::string& token);
 
 }  // namespace demcal::jobs

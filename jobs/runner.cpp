@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <sched.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
@@ -21,6 +22,16 @@
 
 namespace demcal::jobs {
 namespace {
+
+// The CPUs this process may run on: a batch scheduler's allocation (Slurm's
+// --cpus-per-task, taskset, a cgroup cpuset) is an affinity mask, which
+// hardware_concurrency() ignores (it counts the machine's cores).
+int usable_cores() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
+  return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
 
 
 std::string signal_name(int sig) {
@@ -68,6 +79,18 @@ class Runner {
   const Job& job_;
   RunOptions opt_;
   std::string token_;
+  // Says, once per change, which other runners hold the tasks this run waits on.
+  void say_holders(std::string& said) {
+    std::string text, key;  // the key: holders and counts, not the seconds since they beat
+    for (const auto& [w, n] : store_.running_holders(job_.name))
+      if (w != token_) {
+        text += "  " + std::to_string(n) + " held by " + describe_holder(store_, w) + "\n";
+        key += w + "=" + std::to_string(n) + ";";
+      }
+    if (text.empty() || key == said) return;
+    said = key;
+    *opt_.log << "waiting for tasks of job " << job_.name << " that other runners hold:\n" << text;
+  }
   Progress progress_;
   std::filesystem::path dir_;
   std::deque<db::TaskRow> queue_;
@@ -82,12 +105,15 @@ void Runner::prepare() {
   if (opt_.shard.active())
     *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
               << " = " << opt_.shard.index - 1 << "\n";
-  if (int n = store_.requeue_dead(runner_alive))
+  store_.beat(token_);
+  if (opt_.requeue_running)
+    if (int n = store_.requeue_running(job_id)) *opt_.log << "re-queued " << n << " running task(s) (--requeue-running)\n";
+  if (int n = requeue_dead_runners(store_))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (opt_.retry_failed)
     if (int n = store_.reset_failed(job_id)) *opt_.log << "retrying " << n << " failed task(s)\n";
   refill_queue();
-  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int cores = usable_cores();
   workers_ = opt_.workers > 0 ? opt_.workers : cores;
   const int todo = std::max<int>(1, static_cast<int>(queue_.size()));
   // Fewer tasks than cores: give each task's engine the spare cores as threads.
@@ -234,7 +260,8 @@ RunSummary Runner::run() {
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now();
+  auto last_refresh = std::chrono::steady_clock::now(), last_beat = last_refresh;
+  std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
       const db::TaskRow row = queue_.front();
@@ -244,13 +271,18 @@ RunSummary Runner::run() {
     reap(false);
     const bool idle = running_.empty() && queue_.empty();
     const auto now = std::chrono::steady_clock::now();
+    if (now - last_beat > std::chrono::duration<double>(kRunnerBeatS)) {
+      last_beat = now;
+      store_.beat(token_);
+    }
     if (idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
       last_refresh = now;
-      store_.requeue_dead(runner_alive);
+      requeue_dead_runners(store_);
       refill_queue();
       const Counts c = counts();
       if (queue_.empty() && running_.empty() && c.running == 0) break;  // all done or failed
       if (queue_.empty() && running_.empty()) {
+        say_holders(holders_said);
         std::this_thread::sleep_for(std::chrono::milliseconds(200));  // another runner holds the rest
         continue;
       }

@@ -13,8 +13,9 @@ namespace demcal::jobs {
 
 struct RunOptions {
   int workers = 0;           // 0: the core count
-  std::string out_dir;       // HDF5 files go to <out_dir>/<job>/<task-id>.h5
+  std::string out_dir;       // HDF5 files go to <out_dir>/<job>/<task-id>-<key8>.h5
   bool retry_failed = false; // put the job's failed tasks back in the queue first
+  bool requeue_running = false;  // put the job's running tasks back first (their runner is gone)
   bool terminal = false;     // draw a progress bar
   std::ostream* log = nullptr;  // progress and state changes (stderr)
   Shard shard;               // run only this shard's tasks (see shard.hpp)

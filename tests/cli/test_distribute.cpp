@@ -113,6 +113,13 @@ TEST(Distribute, MergeRefusesForeignOrOtherSchemaDatabasesWritingNothing) {
   sql(d.file("future.db"), "PRAGMA user_version = 99");
   fs::copy_file(d.file("part-1.db"), d.file("older.db"));
   sql(d.file("older.db"), "PRAGMA user_version = 0");
+  // A part from the demcal before heartbeats (schema 1: no runners table) merges.
+  fs::copy_file(d.file("part-1.db"), d.file("v1.db"));
+  sql(d.file("v1.db"), "DROP TABLE runners; PRAGMA user_version = 1");
+  {
+    const Result r1 = run_demcal({"merge", "v1.db", "--into", "from-v1.db"}, d.path.string());
+    EXPECT_EQ(r1.rc, 0) << r1.err;
+  }
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"text.db", "not a SQLite database"},
       {"foreign.db", "not a demcal one"},
@@ -210,6 +217,21 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_FALSE(fs::exists(d.file("bad.sh")));
   EXPECT_EQ(run_demcal({"slurm", "j.json", "--array", "0"}, d.path.string()).rc, 2);
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "nodir/x.db", "--out", "bad.sh"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db: the folder"), std::string::npos) << r.err;
+  fs::create_directories(d.path / "my runs");
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "my runs/x.db", "--out", "bad.sh"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("has a blank in its path"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("bad.sh")));
+  // A relative --demcal is written absolute: the script runs it from the database's folder.
+  fs::create_directories(d.path / "sub");
+  fs::copy_file(DEMCAL_BIN, d.file("sub/demcal"));
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "slurm.db", "--demcal", "sub/demcal", "--out", "rel.sh"},
+                 d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(slurp(d.file("rel.sh")).find("DEMCAL='" + fs::canonical(d.file("sub/demcal")).string() + "'"), std::string::npos);
 }
 
 #ifndef DEMCAL_HAVE_MPI
@@ -235,3 +257,17 @@ TEST(Distribute, HelpForMergeAndSlurm) {
   EXPECT_NE(r.out.find("--mpi"), std::string::npos) << r.out;
   EXPECT_EQ(run_demcal({"merge", "--into", "x.db"}, d.path.string()).rc, 2);  // no parts
 }
+
+namespace demcal::test {
+namespace {
+
+TEST(Distribute, AFailedShardsHintRepeatsItsShardAndOutput) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("fl", {0.1, 3.0}));  // the second task fails (step past the critical one)
+  const Result r = run_demcal({"run", "j.json", "--db", "p2.db", "--shard", "2/2", "--out", "o2"}, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("demcal run j.json --db p2.db --shard 2/2 --out o2 --retry-failed"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace demcal::test

@@ -1,0 +1,69 @@
+// Who holds a running task, and when a run may take it back: a runner on this host
+// by its process, one on another host by its heartbeat in the database.
+#include "../temp_dir.hpp"
+#include "db/store.hpp"
+#include "jobs/liveness.hpp"
+
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <unistd.h>
+
+namespace demcal::jobs {
+namespace {
+
+std::vector<db::NewTask> three_tasks() {
+  std::vector<db::NewTask> out;
+  for (const char* k : {"k1", "k2", "k3"}) out.push_back({k, "collision", std::string("{\"k\":\"") + k + "\"}"});
+  return out;
+}
+
+void age_heartbeat(const std::string& path, const std::string& token, double seconds) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  const std::string sql =
+      "UPDATE runners SET last_seen = last_seen - " + std::to_string(seconds) + " WHERE token = '" + token + "'";
+  ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  sqlite3_close(db);
+}
+
+TEST(Liveness, ARunnerOnAnotherHostIsJudgedByItsHeartbeat) {
+  demcal::test::TempDir d;
+  const std::string path = d.file("a.db");
+  db::Store s(path);
+  s.put_job("j", "{}", three_tasks());
+  const auto rows = s.tasks("j");
+  const std::string beating = "node01:30457:123", silent = "node02:411:77", legacy = "node03:9:1";
+  ASSERT_TRUE(s.claim(rows[0].id, beating));
+  ASSERT_TRUE(s.claim(rows[1].id, silent));
+  ASSERT_TRUE(s.claim(rows[2].id, legacy));  // a runner from before heartbeats: never beat
+  s.beat(beating);
+  s.beat(silent);
+  age_heartbeat(path, silent, kRunnerLeaseS + 5);
+  age_heartbeat(path, beating, kRunnerLeaseS - 30);  // late, but within the lease
+  EXPECT_TRUE(holder_alive(s, beating));
+  EXPECT_FALSE(holder_alive(s, silent));
+  EXPECT_TRUE(holder_alive(s, legacy));
+  EXPECT_EQ(requeue_dead_runners(s), 1);
+  EXPECT_EQ(s.task(rows[1].id)->status, "pending");
+  EXPECT_EQ(s.task(rows[0].id)->status, "running");
+  EXPECT_EQ(s.task(rows[2].id)->status, "running");
+  EXPECT_NE(describe_holder(s, beating).find("another host, last seen"), std::string::npos);
+  EXPECT_NE(describe_holder(s, legacy).find("--requeue-running"), std::string::npos);
+  // The user says the legacy runner is gone: the job's running tasks go back.
+  EXPECT_EQ(s.requeue_running(*s.find_job("j")), 2);
+  for (const auto& r : s.tasks("j")) EXPECT_EQ(r.status, "pending");
+}
+
+TEST(Liveness, ARunnerOnThisHostIsJudgedByItsProcess) {
+  demcal::test::TempDir d;
+  db::Store s(d.file("a.db"));
+  EXPECT_TRUE(holder_alive(s, runner_token()));
+  // This host, a pid that cannot be ours with a start time that cannot match.
+  const std::string mine = runner_token();
+  const std::string host = mine.substr(0, mine.find(':'));
+  EXPECT_FALSE(holder_alive(s, host + ":" + std::to_string(getpid()) + ":1"));
+}
+
+}  // namespace
+}  // namespace demcal::jobs
