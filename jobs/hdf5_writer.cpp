@@ -73,7 +73,9 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
     const char* units;
   };
   const Column cols[] = {{"x", &s.x, "m"},         {"y", &s.y, "m"},   {"z", &s.z, "m"},  {"radius", &s.radius, "m"},
-                         {"vx", &s.vx, "m/s"}, {"vy", &s.vy, "m/s"}, {"vz", &s.vz, "m/s"}};
+                         {"vx", &s.vx, "m/s"}, {"vy", &s.vy, "m/s"}, {"vz", &s.vz, "m/s"},
+                         {"wx", &s.wx, "rad/s"}, {"wy", &s.wy, "rad/s"}, {"wz", &s.wz, "rad/s"},
+                         {"fixed", &s.fixed, "1"}};
   for (const Column& c : cols) {
     H5::DataSet ds = write_column(g, c.name, *c.data);
     string_attr(ds, "units", c.units);
@@ -95,6 +97,10 @@ void SnapshotObserver::on_snapshot(const std::string& label, double time, const 
     s.vx.push_back(p.v[i].x());
     s.vy.push_back(p.v[i].y());
     s.vz.push_back(p.v[i].z());
+    s.wx.push_back(p.w[i].x());
+    s.wy.push_back(p.w[i].y());
+    s.wz.push_back(p.w[i].z());
+    s.fixed.push_back(p.fixed[i] ? 1.0 : 0.0);
   }
   snapshots.push_back(std::move(s));
 }
@@ -110,6 +116,8 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     string_attr(f, "scene", info.scene);
     string_attr(f, "params", params.dump());
     string_attr(f, "task_key", info.task_key);
+    string_attr(f, "status", info.status);
+    if (!info.message.empty()) string_attr(f, "message", info.message);
     double_attr(f, "task_id", static_cast<double>(info.task_id));
     double_attr(f, "physics_version", kPhysicsVersion);
     H5::Group root = f.createGroup("series");

@@ -2,7 +2,8 @@
 // Per-task HDF5 files: every time series as a group /series/<name> holding one
 // chunked, deflated 1-D dataset per column (the order is in the group's "columns"
 // attribute), the task parameters as the root attribute "params", and optional
-// particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz,
+// particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz, wx,
+// wy, wz, fixed,
 // with attributes TimeValue and label) that ParaView's H5Part reader opens. The
 // scenes' snapshot points are listed in engine/observer.hpp.
 #include "engine/observer.hpp"
@@ -17,7 +18,8 @@ namespace demcal::jobs {
 struct Snapshot {
   std::string label;
   double time = 0;
-  std::vector<double> x, y, z, radius, vx, vy, vz;
+  std::vector<double> x, y, z, radius, vx, vy, vz, wx, wy, wz;
+  std::vector<double> fixed;  // 1 for a grain that never moves (a rough floor), else 0
 };
 
 // Collects snapshots from a running scene (only when asked for: they are big).
@@ -36,6 +38,8 @@ struct TaskFileInfo {
   std::string scene;
   std::string task_key;  // the task's key in the database (db::task_key)
   std::int64_t task_id = 0;
+  std::string status = "done";  // or "failed": a failed run's series end where it stopped
+  std::string message;          // a failed task's reason, a finished one's warnings
 };
 
 // Root attributes: scene, params (JSON), task_key, task_id and physics_version; each

@@ -47,22 +47,30 @@ nlohmann::json run_scene(const WorkerTask& t) {
   if (!scene) throw std::runtime_error("unknown scene " + t.scene);
   SnapshotObserver obs(t.snapshots);
   const SceneOutput r = scene->run(t.params, RunContext{t.threads, &obs});
-  write_task_hdf5(t.h5_path, TaskFileInfo{t.scene, t.task_key, t.task_id}, t.params, r.series, obs.snapshots);
-  out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
   nlohmann::json metrics = nlohmann::json::array();
   for (const auto& [name, value] : r.metrics) metrics.push_back({name, encode(value)});
   out["metrics"] = metrics;
+  TaskFileInfo info;
+  info.scene = t.scene;
+  info.task_key = t.task_key;
+  info.task_id = t.task_id;
   if (r.outcome.ok()) {
     out["status"] = "done";
     // A finished task's warnings (not quasi-static, a diagnostic knob on, ...) travel
     // with it: the metrics stand, and the user must hear what they stand on. A scene
     // that ends ok joins its warnings into the message (SceneOutcome).
     if (!r.outcome.message.empty()) out["warnings"] = r.outcome.message;
+    info.message = r.outcome.message;
   } else {
     out["status"] = "failed";
     out["error"] = std::string(engine::to_string(r.outcome.status)) + " in stage " + r.outcome.failed_stage + ": " +
                    r.outcome.message;
+    info.status = "failed";
+    info.message = out["error"].get<std::string>();
   }
+  // The file says how the run ended: a failed run's series stop where it did.
+  write_task_hdf5(t.h5_path, info, t.params, r.series, obs.snapshots);
+  out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
   return out;
 }
 

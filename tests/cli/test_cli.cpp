@@ -238,6 +238,9 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
   EXPECT_EQ(text(f.openDataSet("series/energy/time"), "units"), "s");
   EXPECT_EQ(text(f.openDataSet("series/energy/kinetic"), "units"), "J");
   EXPECT_EQ(text(f.openDataSet("Step#0/vx"), "units"), "m/s");
+  EXPECT_EQ(text(f.openDataSet("Step#1/wz"), "units"), "rad/s");  // spins: eta is half of what is calibrated
+  EXPECT_TRUE(f.nameExists("Step#1/fixed"));
+  EXPECT_EQ(text(f, "status"), "done");
   H5::H5File p((d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain[0].id, plain[0].key)).string(), H5F_ACC_RDONLY);
   EXPECT_FALSE(p.nameExists("Step#0"));
   EXPECT_TRUE(p.nameExists("series"));
@@ -294,7 +297,7 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   // folder) is refused, not plotted.
   {
     const std::string other = d.file("other.h5");
-    demcal::jobs::write_task_hdf5(other, {"collision", "0123456789abcdef", task.id}, nlohmann::json::object(), {}, {});
+    demcal::jobs::write_task_hdf5(other, {"collision", "0123456789abcdef", task.id, "done", ""}, nlohmann::json::object(), {}, {});
     fs::copy_file(file, d.file("mine.h5"));
     fs::copy_file(other, file, fs::copy_options::overwrite_existing);
     r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "o.png"}, d.path.string());

@@ -4,6 +4,7 @@
 #include "jobs/hdf5_writer.hpp"
 #include "jobs/worker.hpp"
 
+#include <H5Cpp.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -62,16 +63,25 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
   s.rows = {{0.0, 1.0}, {1.0, 1.0}};
   // Written whole: the key and id are in it, no .part is left beside it.
   const std::string ok = d.file("1-abcdef01.h5");
-  write_task_hdf5(ok, {"collision", "abcdef0123456789", 1}, {{"seed", 1}}, {s}, {});
+  write_task_hdf5(ok, {"collision", "abcdef0123456789", 1, "failed", "unstable in stage run: energy grew"}, {{"seed", 1}}, {s}, {});
   EXPECT_EQ(read_task_key(ok), "abcdef0123456789");
   EXPECT_EQ(read_series(ok, "energy").rows.size(), 2u);
   EXPECT_FALSE(std::filesystem::exists(ok + ".part"));
+  {  // a failed run's file says so, with the reason
+    H5::H5File f(ok, H5F_ACC_RDONLY);
+    std::string status, message;
+    H5::Attribute a = f.openAttribute("status"), m = f.openAttribute("message");
+    a.read(a.getStrType(), status);
+    m.read(m.getStrType(), message);
+    EXPECT_EQ(status, "failed");
+    EXPECT_EQ(message, "unstable in stage run: energy grew");
+  }
   // The file cannot be made (a folder in the way of its .part): an exception naming
   // the path, not an abort, and no file at the path.
   const std::string bad = d.file("2-abcdef02.h5");
   std::filesystem::create_directories(bad + ".part");
   try {
-    write_task_hdf5(bad, {"collision", "abcdef0223456789", 2}, {}, {s}, {});
+    write_task_hdf5(bad, {"collision", "abcdef0223456789", 2, "done", ""}, {}, {s}, {});
     FAIL() << "no exception";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("cannot write the HDF5 file " + bad), std::string::npos) << e.what();
