@@ -228,6 +228,7 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
     const db::TaskMessage msg = db::task_message(r.task);
     if (!msg.error.empty()) o["error"] = msg.error;
     if (!msg.warning.empty()) o["warning"] = msg.warning;
+    if (!r.hdf5.empty()) o["hdf5"] = r.hdf5;
     arr.push_back(std::move(o));
   }
   out << arr.dump(2) << "\n";
@@ -285,6 +286,8 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     }
     if (!ok) continue;
     r.metrics = store.metrics(r.task.id);
+    for (const auto& [kind, path] : store.artifacts(r.task.id))
+      if (kind == "hdf5") r.hdf5 = path;
     out.push_back(std::move(r));
   }
   return out;

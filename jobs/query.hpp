@@ -20,6 +20,7 @@ struct ResultRow {
   db::TaskRow task;
   nlohmann::json params;
   std::vector<std::pair<std::string, double>> metrics;
+  std::string hdf5;  // the task's HDF5 file, "" when it has none
 };
 
 // Keys: any task parameter, or status, scene, task (the id). Numbers compare as

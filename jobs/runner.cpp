@@ -138,6 +138,7 @@ void Runner::prepare() {
     threads_ = 1;
   }
   std::filesystem::create_directories(dir_);
+  if (!queue_.empty()) *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
 }
 
 void Runner::refill_queue() {

@@ -84,6 +84,9 @@ TEST(Cli, RunQueryStatusAndResume) {
   ASSERT_EQ(rows.size(), 1u);
   EXPECT_DOUBLE_EQ(rows[0]["params"]["dt_factor"].get<double>(), 0.1);
   EXPECT_TRUE(rows[0]["metrics"]["drift_per_million_steps"].is_number());
+  // Where the task's series are: the file a user opens.
+  ASSERT_TRUE(rows[0].contains("hdf5")) << rows[0].dump();
+  EXPECT_TRUE(fs::exists(rows[0]["hdf5"].get<std::string>()));
 
   r = run_demcal({"query", "--format", "csv", "--metrics", "dt,drift_per_million_steps"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
