@@ -267,6 +267,9 @@ TEST(Distribute, AFailedShardsHintRepeatsItsShardAndOutput) {
   const Result r = run_demcal({"run", "j.json", "--db", "p2.db", "--shard", "2/2", "--out", "o2"}, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
   EXPECT_NE(r.err.find("demcal run j.json --db p2.db --shard 2/2 --out o2 --retry-failed"), std::string::npos) << r.err;
+  // The part holds half the job, and status says so (its own counts look complete).
+  const Result st = run_demcal({"status", "--db", "p2.db"}, d.path.string());
+  EXPECT_NE(st.out.find("fl: 1 of the job file's 2 task(s) are not in this database"), std::string::npos) << st.out;
 }
 
 }  // namespace
