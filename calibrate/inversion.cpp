@@ -258,6 +258,16 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i)
       if (mis[static_cast<std::size_t>(j * n + i)] <= fbest + opt.delta) include(i, j);
+  res.theta_lo1 = res.eta_lo1 = INFINITY;
+  res.theta_hi1 = res.eta_hi1 = -INFINITY;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i)
+      if (mis[static_cast<std::size_t>(j * n + i)] <= fbest + opt.delta1) {
+        res.theta_lo1 = std::min(res.theta_lo1, theta_at(i));
+        res.theta_hi1 = std::max(res.theta_hi1, theta_at(i));
+        res.eta_lo1 = std::min(res.eta_lo1, eta_at(j));
+        res.eta_hi1 = std::max(res.eta_hi1, eta_at(j));
+      }
   if (R.cells == 0) include(static_cast<int>(std::lround(x[0] * (n - 1))), static_cast<int>(std::lround(x[1] * (n - 1))));
   // Extents to the cell edges at the grid resolution (the region is at least one cell).
   const double hc = 0.5 * (box.theta_hi - box.theta_lo) / (n - 1), he = 0.5 * (box.eta_hi - box.eta_lo) / (n - 1);
@@ -265,6 +275,14 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
   R.theta_hi = std::min(box.theta_hi, R.theta_hi + hc);
   R.eta_lo = std::max(box.eta_lo, R.eta_lo - he);
   R.eta_hi = std::min(box.eta_hi, R.eta_hi + he);
+  if (!(res.theta_lo1 <= res.theta_hi1)) {  // no cell that low: the best point's own cell
+    res.theta_lo1 = res.theta_hi1 = res.theta;
+    res.eta_lo1 = res.eta_hi1 = res.eta;
+  }
+  res.theta_lo1 = std::max(box.theta_lo, std::min(res.theta_lo1, res.theta) - hc);
+  res.theta_hi1 = std::min(box.theta_hi, std::max(res.theta_hi1, res.theta) + hc);
+  res.eta_lo1 = std::max(box.eta_lo, std::min(res.eta_lo1, res.eta) - he);
+  res.eta_hi1 = std::min(box.eta_hi, std::max(res.eta_hi1, res.eta) + he);
 
   // A large residual at the best point: on a bound, the targets lie beyond it; with
   // no more targets than unknowns, no point of the grid matches them together.
@@ -360,6 +378,9 @@ nlohmann::json FitResult::to_json() const {
                  {"cells", region.cells},
                  {"n", region.n},
                  {"mask", region.mask}};
+  j["intervals"] = {{"level", "misfit - min <= 3.84 (95%, each parameter alone)"},
+                    {"theta_deg", {num(theta_lo1), num(theta_hi1)}},
+                    {"eta", {num(eta_lo1), num(eta_hi1)}}};
   j["warnings"] = warnings;
   j["unreachable"] = unreachable;
   j["method"] = method;

@@ -58,6 +58,7 @@ struct Region {
 struct FitOptions {
   int region_n = 161;      // fine grid over the box, per axis
   double delta = 5.99;     // misfit - min for 95% with 2 parameters (chi-square, 2 dof)
+  double delta1 = 3.84;    // misfit - min for one parameter's 95% interval (chi-square, 1 dof)
   int global_evals = 3000; // GN_DIRECT_L evaluations
   double reach_sigmas = 2; // a target further than this many sigma beyond the surrogate's range is unreachable
 };
@@ -68,6 +69,9 @@ struct FitResult {
   double theta = kNaN, eta = kNaN, misfit = kNaN;
   std::vector<TargetFit> targets;
   Region region;
+  // Each parameter's own 95% interval (the other one free): the cells with misfit -
+  // min <= 3.84 (chi-square, 1 dof), projected. Narrower than the joint region's extents.
+  double theta_lo1 = kNaN, theta_hi1 = kNaN, eta_lo1 = kNaN, eta_hi1 = kNaN;
   std::vector<std::string> warnings, unreachable;
   std::string method;
   nlohmann::json to_json() const;

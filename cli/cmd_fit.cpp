@@ -55,7 +55,9 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
   }
   if (r.ok)
     out << "95% region (misfit - min <= 5.99): theta " << g(r.region.theta_lo) << " .. " << g(r.region.theta_hi) << " deg, eta "
-        << g(r.region.eta_lo) << " .. " << g(r.region.eta_hi) << "\n";
+        << g(r.region.eta_lo) << " .. " << g(r.region.eta_hi) << " (joint)\n"
+        << "95% intervals, each parameter alone (misfit - min <= 3.84): theta " << g(r.theta_lo1) << " .. "
+        << g(r.theta_hi1) << " deg, eta " << g(r.eta_lo1) << " .. " << g(r.eta_hi1) << "\n";
   for (const auto& w : r.warnings) out << "warning: " << w << "\n";
   for (const auto& u : r.unreachable) out << "unreachable: " << u << "\n";
 }

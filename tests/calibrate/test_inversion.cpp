@@ -50,13 +50,15 @@ Trial trial(std::uint64_t seed, double lab = 0.0, double sigma = calibrate::kNaN
 }
 
 TEST(Inversion, RecoversKnownParametersInsideThe95PercentRegion) {
-  int covered = 0, ok = 0;
+  int covered = 0, ok = 0, covered_theta = 0, covered_eta = 0;
   double worst_theta = 0, worst_eta = 0, err2[2] = {0, 0}, sig[2] = {0, 0};
   const int n = 50;
   for (std::uint64_t seed = 1; seed <= n; ++seed) {
     const Trial t = trial(seed);
     ok += t.fit.ok;
     if (t.fit.region.contains(t.fit.box, t.theta, t.eta)) ++covered;
+    covered_theta += t.theta >= t.fit.theta_lo1 && t.theta <= t.fit.theta_hi1;
+    covered_eta += t.eta >= t.fit.eta_lo1 && t.eta <= t.fit.eta_hi1;
     worst_theta = std::max(worst_theta, std::abs(t.fit.theta - t.theta));
     worst_eta = std::max(worst_eta, std::abs(t.fit.eta - t.eta));
     err2[0] += t.err_pk * t.err_pk / n;
@@ -70,6 +72,9 @@ TEST(Inversion, RecoversKnownParametersInsideThe95PercentRegion) {
               std::sqrt(err2[0]), sig[1], std::sqrt(err2[1]));
   EXPECT_EQ(ok, n);
   EXPECT_GE(covered, 43);  // >= 85%
+  std::printf("per-parameter 95%% intervals hold the true theta in %d, eta in %d of %d\n", covered_theta, covered_eta, n);
+  EXPECT_GE(covered_theta, 43);
+  EXPECT_GE(covered_eta, 43);
   EXPECT_LT(worst_theta, 5.0);
   EXPECT_LT(worst_eta, 0.1);
   // Honest, not merely safe: the stated sigma is the surrogate's real error within a
@@ -113,7 +118,19 @@ TEST(Inversion, ReportsBestPointPredictionsAndRegion) {
   EXPECT_GE(t.fit.region.theta_hi, t.fit.theta);
   EXPECT_LE(t.fit.region.eta_lo, t.fit.eta);
   EXPECT_GE(t.fit.region.eta_hi, t.fit.eta);
+  // Each parameter's own interval holds the best point and lies within the joint extents.
+  const auto& f = t.fit;
+  EXPECT_LE(f.region.theta_lo, f.theta_lo1);
+  EXPECT_LE(f.theta_lo1, f.theta);
+  EXPECT_LE(f.theta, f.theta_hi1);
+  EXPECT_LE(f.theta_hi1, f.region.theta_hi);
+  EXPECT_LE(f.region.eta_lo, f.eta_lo1);
+  EXPECT_LE(f.eta_lo1, f.eta);
+  EXPECT_LE(f.eta, f.eta_hi1);
+  EXPECT_LE(f.eta_hi1, f.region.eta_hi);
+  EXPECT_LT(f.theta_hi1 - f.theta_lo1, f.region.theta_hi - f.region.theta_lo);
   const auto j = t.fit.to_json();
+  EXPECT_EQ(j["intervals"]["theta_deg"][0].get<double>(), f.theta_lo1);
   EXPECT_EQ(j["status"], "ok");
   EXPECT_TRUE(j.contains("theta_deg"));
 }
