@@ -255,34 +255,32 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     if (j == 0) R.at_eta_lo = true;
     if (j == n - 1) R.at_eta_hi = true;
   };
+  // Each parameter's own interval starts at the best point and takes in every cell
+  // within delta1 (fewer than the region's, whose threshold is higher).
+  res.theta_lo1 = res.theta_hi1 = res.theta;
+  res.eta_lo1 = res.eta_hi1 = res.eta;
   for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i)
-      if (mis[static_cast<std::size_t>(j * n + i)] <= fbest + opt.delta) include(i, j);
-  res.theta_lo1 = res.eta_lo1 = INFINITY;
-  res.theta_hi1 = res.eta_hi1 = -INFINITY;
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i)
-      if (mis[static_cast<std::size_t>(j * n + i)] <= fbest + opt.delta1) {
+    for (int i = 0; i < n; ++i) {
+      const double m = mis[static_cast<std::size_t>(j * n + i)];
+      if (m <= fbest + opt.delta) include(i, j);
+      if (m <= fbest + opt.delta1) {
         res.theta_lo1 = std::min(res.theta_lo1, theta_at(i));
         res.theta_hi1 = std::max(res.theta_hi1, theta_at(i));
         res.eta_lo1 = std::min(res.eta_lo1, eta_at(j));
         res.eta_hi1 = std::max(res.eta_hi1, eta_at(j));
       }
+    }
   if (R.cells == 0) include(static_cast<int>(std::lround(x[0] * (n - 1))), static_cast<int>(std::lround(x[1] * (n - 1))));
   // Extents to the cell edges at the grid resolution (the region is at least one cell).
   const double hc = 0.5 * (box.theta_hi - box.theta_lo) / (n - 1), he = 0.5 * (box.eta_hi - box.eta_lo) / (n - 1);
-  R.theta_lo = std::max(box.theta_lo, R.theta_lo - hc);
-  R.theta_hi = std::min(box.theta_hi, R.theta_hi + hc);
-  R.eta_lo = std::max(box.eta_lo, R.eta_lo - he);
-  R.eta_hi = std::min(box.eta_hi, R.eta_hi + he);
-  if (!(res.theta_lo1 <= res.theta_hi1)) {  // no cell that low: the best point's own cell
-    res.theta_lo1 = res.theta_hi1 = res.theta;
-    res.eta_lo1 = res.eta_hi1 = res.eta;
-  }
-  res.theta_lo1 = std::max(box.theta_lo, std::min(res.theta_lo1, res.theta) - hc);
-  res.theta_hi1 = std::min(box.theta_hi, std::max(res.theta_hi1, res.theta) + hc);
-  res.eta_lo1 = std::max(box.eta_lo, std::min(res.eta_lo1, res.eta) - he);
-  res.eta_hi1 = std::min(box.eta_hi, std::max(res.eta_hi1, res.eta) + he);
+  auto to_edges = [](double& lo, double& hi, double half, double box_lo, double box_hi) {
+    lo = std::max(box_lo, lo - half);
+    hi = std::min(box_hi, hi + half);
+  };
+  to_edges(R.theta_lo, R.theta_hi, hc, box.theta_lo, box.theta_hi);
+  to_edges(R.eta_lo, R.eta_hi, he, box.eta_lo, box.eta_hi);
+  to_edges(res.theta_lo1, res.theta_hi1, hc, box.theta_lo, box.theta_hi);
+  to_edges(res.eta_lo1, res.eta_hi1, he, box.eta_lo, box.eta_hi);
 
   // A large residual at the best point: on a bound, the targets lie beyond it; with
   // no more targets than unknowns, no point of the grid matches them together.

@@ -38,19 +38,18 @@ Box ResponseSurface::box() const {
   return b;
 }
 
-std::vector<double> ResponseSurface::data_thetas() const {
+namespace {
+// Distinct values of one coordinate over the points that have data, ascending.
+std::vector<double> data_values(const std::vector<GridPoint>& points, double GridPoint::*axis) {
   std::set<double> v;
   for (const auto& p : points)
-    if (!p.hole()) v.insert(p.theta);
+    if (!p.hole()) v.insert(p.*axis);
   return {v.begin(), v.end()};
 }
+}  // namespace
 
-std::vector<double> ResponseSurface::data_etas() const {
-  std::set<double> v;
-  for (const auto& p : points)
-    if (!p.hole()) v.insert(p.eta);
-  return {v.begin(), v.end()};
-}
+std::vector<double> ResponseSurface::data_thetas() const { return data_values(points, &GridPoint::theta); }
+std::vector<double> ResponseSurface::data_etas() const { return data_values(points, &GridPoint::eta); }
 
 Box ResponseSurface::data_box() const {
   const auto t = data_thetas(), e = data_etas();

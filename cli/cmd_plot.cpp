@@ -3,6 +3,7 @@
 #include "db/store.hpp"
 #include "jobs/hdf5_writer.hpp"
 #include "jobs/job_error.hpp"
+#include "jobs/query.hpp"
 #include "jobs/series_plot.hpp"
 
 #include <filesystem>
@@ -31,9 +32,7 @@ void add_plot(CLI::App& app, int& exit_code) {
       db::Store store(a->db, /*read_only=*/true);
       const auto task = store.task(a->task);
       if (!task) throw jobs::JobError("TASK", "no task with id " + std::to_string(a->task));
-      std::string h5;
-      for (const auto& [kind, path] : store.artifacts(a->task))
-        if (kind == "hdf5") h5 = path;
+      const std::string h5 = jobs::task_hdf5(store, a->task);
       if (h5.empty())
         throw jobs::JobError("TASK", "task " + std::to_string(a->task) + " has no stored series (status " + task->status + ")");
       // The file must be this task's: a file at that path written for another task

@@ -33,12 +33,17 @@ void check_token(const std::string& option, const std::string& value, const char
     throw jobs::JobError(option, std::string("expected ") + what + ", got \"" + value + "\"");
 }
 
+// Where the shards' databases and logs go: --parts, or parts/ beside the database.
+fs::path parts_folder(const SlurmArgs& a) {
+  return a.parts.empty() ? fs::absolute(a.db).parent_path() / "parts" : fs::absolute(a.parts);
+}
+
 std::string script(const SlurmArgs& a, const jobs::Job& job) {
   // Absolute: the script changes into the database's folder before running it.
   const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
   const fs::path db = fs::absolute(a.db);
   const fs::path workdir = db.parent_path();
-  const fs::path parts = a.parts.empty() ? workdir / "parts" : fs::absolute(a.parts);
+  const fs::path parts = parts_folder(a);
   const std::string n = std::to_string(a.array);
   std::ostringstream s;
   s << "#!/usr/bin/env bash\n"
@@ -104,7 +109,7 @@ int slurm(SlurmArgs a) {
   // The script runs in the database's folder and writes the parts beside it: both
   // must exist when it runs, and a #SBATCH line cannot carry a path with blanks.
   require_writable_file("--db", a.db);
-  const fs::path parts = a.parts.empty() ? fs::absolute(a.db).parent_path() / "parts" : fs::absolute(a.parts);
+  const fs::path parts = parts_folder(a);
   if (parts.string().find_first_of(" \t") != std::string::npos)
     throw jobs::JobError(a.parts.empty() ? "--db" : "--parts",
                          "the parts folder " + parts.string() +

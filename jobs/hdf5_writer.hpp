@@ -3,9 +3,8 @@
 // chunked, deflated 1-D dataset per column (the order is in the group's "columns"
 // attribute), the task parameters as the root attribute "params", and optional
 // particle snapshots in the H5Part layout (/Step#<n>/x, y, z, radius, vx, vy, vz, wx,
-// wy, wz, fixed,
-// with attributes TimeValue and label) that ParaView's H5Part reader opens. The
-// scenes' snapshot points are listed in engine/observer.hpp.
+// wy, wz, fixed, with attributes TimeValue and label) that ParaView's H5Part reader
+// opens. The scenes' snapshot points are listed in engine/observer.hpp.
 #include "engine/observer.hpp"
 
 #include <cstdint>
@@ -42,7 +41,8 @@ struct TaskFileInfo {
   std::string message;          // a failed task's reason, a finished one's warnings
 };
 
-// Root attributes: scene, params (JSON), task_key, task_id and physics_version; each
+// Root attributes: scene, params (JSON), task_key, task_id, status, message (when
+// any) and physics_version; each
 // series column and snapshot dataset carries a "units" attribute (SI; "1" for a pure
 // number). Written to `path`.part and renamed into place when whole; throws
 // std::runtime_error naming the path and the reason when it cannot be written.

@@ -2,10 +2,9 @@
 
 #include "db/store.hpp"
 
-#include <chrono>
 #include <cmath>
-
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <unistd.h>
 
@@ -34,38 +33,34 @@ bool proc_stat(long pid, char& state, std::string& start) {
   return true;
 }
 
-std::string host_of(const std::string& token) {
+// A token's parts ("host:pid:start"); nullopt when it is not a token we wrote.
+struct Token {
+  std::string host, pid, start;
+};
+std::optional<Token> parse_token(const std::string& token) {
   const auto a = token.rfind(':');
   const auto b = a == std::string::npos || a == 0 ? std::string::npos : token.rfind(':', a - 1);
-  return b == std::string::npos ? std::string() : token.substr(0, b);
+  if (b == std::string::npos) return std::nullopt;
+  return Token{token.substr(0, b), token.substr(b + 1, a - b - 1), token.substr(a + 1)};
 }
 
-double now_s() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+// A runner on this host: its process exists, is no zombie, and started when the
+// token says (a recycled pid has another start time).
+bool process_alive(const Token& t) {
+  long pid = 0;
+  try {
+    pid = std::stol(t.pid);
+  } catch (const std::exception&) {
+    return false;
+  }
+  char state = 0;
+  std::string start;
+  if (!proc_stat(pid, state, start)) return false;
+  if (state == 'Z' || state == 'X') return false;
+  return start == t.start;
 }
 
 }  // namespace
-
-bool holder_alive(db::Store& store, const std::string& token) {
-  if (host_of(token) == host() || host_of(token).empty()) return runner_alive(token);
-  const auto seen = store.last_seen(token);
-  return !seen || now_s() - *seen < kRunnerLeaseS;
-}
-
-int requeue_dead_runners(db::Store& store) {
-  return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w); });
-}
-
-std::string describe_holder(db::Store& store, const std::string& token) {
-  if (host_of(token) == host()) return token + " (this host)";
-  const auto seen = store.last_seen(token);
-  if (!seen)
-    return token + " (another host, no heartbeat: a demcal from before heartbeats; if it is gone, `demcal run JOB "
-                   "--requeue-running` puts its tasks back)";
-  const double ago = now_s() - *seen;
-  return token + " (another host, last seen " + std::to_string(static_cast<long>(std::lround(ago))) +
-         " s ago; its tasks are re-queued once it is silent for " + std::to_string(static_cast<long>(kRunnerLeaseS)) + " s)";
-}
 
 std::string runner_token() {
   char state = 0;
@@ -74,23 +69,40 @@ std::string runner_token() {
   return host() + ":" + std::to_string(getpid()) + ":" + start;
 }
 
-bool runner_alive(const std::string& token) {
-  const auto a = token.rfind(':');
-  const auto b = a == std::string::npos || a == 0 ? std::string::npos : token.rfind(':', a - 1);
-  if (b == std::string::npos) return false;  // not a token we wrote
-  if (token.substr(0, b) != host()) return true;
-  if (token == runner_token()) return true;
-  long pid = 0;
-  try {
-    pid = std::stol(token.substr(b + 1, a - b - 1));
-  } catch (const std::exception&) {
-    return false;
-  }
-  char state = 0;
-  std::string start;
-  if (!proc_stat(pid, state, start)) return false;
-  if (state == 'Z' || state == 'X') return false;
-  return start == token.substr(a + 1);
+bool holder_alive(db::Store& store, const std::string& token) {
+  const auto t = parse_token(token);
+  if (!t) return false;
+  if (t->host == host()) return token == runner_token() || process_alive(*t);
+  const auto seen = store.last_seen(token);
+  return !seen || db::unix_now() - *seen < kRunnerLeaseS;
+}
+
+int requeue_dead_runners(db::Store& store) {
+  return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w); });
+}
+
+std::string describe_holder(db::Store& store, const std::string& token) {
+  const auto t = parse_token(token);
+  if (t && t->host == host()) return token + " (this host)";
+  const auto seen = store.last_seen(token);
+  if (!seen)
+    return token + " (another host, no heartbeat: a demcal from before heartbeats; if it is gone, `demcal run JOB "
+                   "--requeue-running` puts its tasks back)";
+  const double ago = db::unix_now() - *seen;
+  return token + " (another host, last seen " + std::to_string(static_cast<long>(std::lround(ago))) +
+         " s ago; its tasks are re-queued once it is silent for " + std::to_string(static_cast<long>(kRunnerLeaseS)) + " s)";
+}
+
+Heartbeat::Heartbeat(db::Store& store, std::string token) : store_(store), token_(std::move(token)) {
+  store_.beat(token_);
+  last_ = std::chrono::steady_clock::now();
+}
+
+void Heartbeat::tick() {
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_ < std::chrono::duration<double>(kRunnerBeatS)) return;
+  last_ = now;
+  store_.beat(token_);
 }
 
 }  // namespace demcal::jobs

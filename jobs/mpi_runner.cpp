@@ -169,7 +169,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   StopSignalGuard guard;
   const std::string token = runner_token();
   const std::int64_t job_id = record_job(store, job, options.shard, log);
-  store.beat(token);
+  Heartbeat heartbeat(store, token);  // before the re-queue of dead runners' tasks
   if (options.requeue_running)
     if (int n = store.requeue_running(job_id)) log << "re-queued " << n << " running task(s) (--requeue-running)\n";
   if (int n = requeue_dead_runners(store))
@@ -214,7 +214,6 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   const auto t0 = Clock::now();
   std::vector<Rank> ranks(static_cast<std::size_t>(size));
   for (auto& r : ranks) r.last_seen = t0;
-  auto last_beat = t0;
   int ran = 0;
   auto fail_task = [&](int r, const std::string& why) {
     Rank& k = ranks[static_cast<std::size_t>(r)];
@@ -296,10 +295,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     // Judged right after the drain, so that a heartbeat which arrived while rank 0
     // was busy is read first.
     const auto now = Clock::now();
-    if (seconds(now - last_beat) > kRunnerBeatS) {  // rank 0's own heartbeat, for runs on other hosts
-      last_beat = now;
-      store.beat(token);
-    }
+    heartbeat.tick();  // rank 0's own, for runs on other hosts
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (k.lost || k.stopped) continue;

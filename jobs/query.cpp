@@ -262,6 +262,13 @@ Where parse_where(const std::string& text) {
   return Where{text.substr(0, eq), text.substr(eq + 1)};
 }
 
+std::string task_hdf5(db::Store& store, std::int64_t task_id) {
+  std::string h5;
+  for (const auto& [kind, path] : store.artifacts(task_id))
+    if (kind == "hdf5") h5 = path;
+  return h5;
+}
+
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where) {
   std::vector<ResultRow> all;
   for (auto& t : store.tasks(job)) {
@@ -286,8 +293,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     }
     if (!ok) continue;
     r.metrics = store.metrics(r.task.id);
-    for (const auto& [kind, path] : store.artifacts(r.task.id))
-      if (kind == "hdf5") r.hdf5 = path;
+    r.hdf5 = task_hdf5(store, r.task.id);
     out.push_back(std::move(r));
   }
   return out;

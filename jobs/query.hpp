@@ -27,6 +27,9 @@ struct ResultRow {
 // numbers (30 matches 30.0), booleans as true/false. A key no task has is an error.
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where);
 
+// The task's HDF5 file as the database records it, "" when it has none.
+std::string task_hdf5(db::Store& store, std::int64_t task_id);
+
 enum class Format { table, csv, json };
 Format parse_format(const std::string& text);
 

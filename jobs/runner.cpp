@@ -73,24 +73,14 @@ class Runner {
   void stop_all();
   Counts counts();
   std::string describe_task(std::size_t index, std::int64_t task_id) const;
+  // Says, once per change, which other runners hold the tasks this run waits on.
+  void say_holders(std::string& said);
   double eta() ;
 
   db::Store& store_;
   const Job& job_;
   RunOptions opt_;
   std::string token_;
-  // Says, once per change, which other runners hold the tasks this run waits on.
-  void say_holders(std::string& said) {
-    std::string text, key;  // the key: holders and counts, not the seconds since they beat
-    for (const auto& [w, n] : store_.running_holders(job_.name))
-      if (w != token_) {
-        text += "  " + std::to_string(n) + " held by " + describe_holder(store_, w) + "\n";
-        key += w + "=" + std::to_string(n) + ";";
-      }
-    if (text.empty() || key == said) return;
-    said = key;
-    *opt_.log << "waiting for tasks of job " << job_.name << " that other runners hold:\n" << text;
-  }
   Progress progress_;
   std::filesystem::path dir_;
   std::deque<db::TaskRow> queue_;
@@ -105,7 +95,6 @@ void Runner::prepare() {
   if (opt_.shard.active())
     *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
               << " = " << opt_.shard.index - 1 << "\n";
-  store_.beat(token_);
   if (opt_.requeue_running)
     if (int n = store_.requeue_running(job_id)) *opt_.log << "re-queued " << n << " running task(s) (--requeue-running)\n";
   if (int n = requeue_dead_runners(store_))
@@ -145,6 +134,18 @@ void Runner::refill_queue() {
   queue_.clear();
   for (auto& row : store_.tasks(job_.name))
     if (row.status == "pending" && opt_.shard.contains(static_cast<std::size_t>(row.index))) queue_.push_back(std::move(row));
+}
+
+void Runner::say_holders(std::string& said) {
+  std::string text, key;  // the key: holders and counts, not the seconds since they beat
+  for (const auto& [w, n] : store_.running_holders(job_.name))
+    if (w != token_) {
+      text += "  " + std::to_string(n) + " held by " + describe_holder(store_, w) + "\n";
+      key += w + "=" + std::to_string(n) + ";";
+    }
+  if (text.empty() || key == said) return;
+  said = key;
+  *opt_.log << "waiting for tasks of job " << job_.name << " that other runners hold:\n" << text;
 }
 
 std::string Runner::describe_task(std::size_t index, std::int64_t task_id) const {
@@ -255,13 +256,14 @@ void Runner::stop_all() {
 
 RunSummary Runner::run() {
   StopSignalGuard guard;
+  Heartbeat heartbeat(store_, token_);  // before the re-queue of dead runners' tasks
   prepare();
   RunSummary s;
   const Counts start = counts();
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now(), last_beat = last_refresh;
+  auto last_refresh = std::chrono::steady_clock::now();
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
@@ -272,10 +274,7 @@ RunSummary Runner::run() {
     reap(false);
     const bool idle = running_.empty() && queue_.empty();
     const auto now = std::chrono::steady_clock::now();
-    if (now - last_beat > std::chrono::duration<double>(kRunnerBeatS)) {
-      last_beat = now;
-      store_.beat(token_);
-    }
+    heartbeat.tick();
     if (idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
       last_refresh = now;
       requeue_dead_runners(store_);
