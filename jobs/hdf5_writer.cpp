@@ -64,7 +64,7 @@ void write_series(H5::Group& root, const engine::Series& s) {
 }
 
 void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
-  H5::Group g = f.createGroup("Step#" + std::to_string(step));
+  H5::Group g = f.createGroup(snapshot_group(step));
   double_attr(g, "TimeValue", s.time);
   string_attr(g, "label", s.label.empty() ? "snapshot" : s.label);
   struct Column {
@@ -83,6 +83,8 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
 }
 
 }  // namespace
+
+std::string snapshot_group(std::size_t step) { return "Step#" + std::to_string(step); }
 
 void SnapshotObserver::on_snapshot(const std::string& label, double time, const engine::Particles& p) {
   if (!keep_) return;

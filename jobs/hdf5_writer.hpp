@@ -51,6 +51,9 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
 // The task key a file was written for ("" for a file from before keys were written).
 std::string read_task_key(const std::string& path);
 
+// The group that holds snapshot `step` (0-based): "Step#<step>", H5Part's name.
+std::string snapshot_group(std::size_t step);
+
 // Reads one series back (for plotting); throws std::runtime_error when absent.
 engine::Series read_series(const std::string& path, const std::string& name);
 std::vector<std::string> series_names(const std::string& path);

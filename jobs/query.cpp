@@ -229,6 +229,7 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
     if (!msg.error.empty()) o["error"] = msg.error;
     if (!msg.warning.empty()) o["warning"] = msg.warning;
     if (!r.hdf5.empty()) o["hdf5"] = r.hdf5;
+    if (!r.xdmf.empty()) o["xdmf"] = r.xdmf;
     arr.push_back(std::move(o));
   }
   out << arr.dump(2) << "\n";
@@ -262,11 +263,11 @@ Where parse_where(const std::string& text) {
   return Where{text.substr(0, eq), text.substr(eq + 1)};
 }
 
-std::string task_hdf5(db::Store& store, std::int64_t task_id) {
-  std::string h5;
-  for (const auto& [kind, path] : store.artifacts(task_id))
-    if (kind == "hdf5") h5 = path;
-  return h5;
+std::string task_artifact(db::Store& store, std::int64_t task_id, const std::string& kind) {
+  std::string found;
+  for (const auto& [k, path] : store.artifacts(task_id))
+    if (k == kind) found = path;
+  return found;
 }
 
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where) {
@@ -294,6 +295,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     if (!ok) continue;
     r.metrics = store.metrics(r.task.id);
     r.hdf5 = task_hdf5(store, r.task.id);
+    r.xdmf = task_artifact(store, r.task.id, "xdmf");
     out.push_back(std::move(r));
   }
   return out;

@@ -21,14 +21,16 @@ struct ResultRow {
   nlohmann::json params;
   std::vector<std::pair<std::string, double>> metrics;
   std::string hdf5;  // the task's HDF5 file, "" when it has none
+  std::string xdmf;  // its snapshots' Xdmf description for ParaView, "" when none were taken
 };
 
 // Keys: any task parameter, or status, scene, task (the id). Numbers compare as
 // numbers (30 matches 30.0), booleans as true/false. A key no task has is an error.
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where);
 
-// The task's HDF5 file as the database records it, "" when it has none.
-std::string task_hdf5(db::Store& store, std::int64_t task_id);
+// A task's file of one kind ("hdf5", "xdmf") as the database records it, "" when it has none.
+std::string task_artifact(db::Store& store, std::int64_t task_id, const std::string& kind);
+inline std::string task_hdf5(db::Store& store, std::int64_t task_id) { return task_artifact(store, task_id, "hdf5"); }
 
 enum class Format { table, csv, json };
 Format parse_format(const std::string& text);

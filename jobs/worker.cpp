@@ -1,6 +1,7 @@
 #include "worker.hpp"
 
 #include "hdf5_writer.hpp"
+#include "xdmf_writer.hpp"
 #include "scene_registry.hpp"
 
 #include <chrono>
@@ -71,6 +72,11 @@ nlohmann::json run_scene(const WorkerTask& t) {
   // The file says how the run ended: a failed run's series stop where it did.
   write_task_hdf5(t.h5_path, info, t.params, r.series, obs.snapshots);
   out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
+  if (!obs.snapshots.empty()) {
+    const std::string xmf = xdmf_path_for(t.h5_path);
+    write_snapshot_xdmf(xmf, std::filesystem::path(t.h5_path).filename().string(), obs.snapshots);
+    out["artifacts"].push_back(nlohmann::json::array({"xdmf", xmf}));
+  }
   return out;
 }
 

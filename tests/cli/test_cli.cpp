@@ -2,8 +2,12 @@
 
 #include "jobs/hdf5_writer.hpp"
 #include "jobs/worker.hpp"
+#include "jobs/xdmf_writer.hpp"
 
 #include <H5Cpp.h>
+
+#include <fstream>
+#include <regex>
 
 using namespace demcal::test;
 using nlohmann::json;
@@ -262,6 +266,57 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
   H5::H5File q((d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain2[0].id, plain2[0].key)).string(),
                H5F_ACC_RDONLY);
   EXPECT_TRUE(q.nameExists("Step#0"));
+  EXPECT_FALSE(fs::exists(demcal::jobs::xdmf_path_for(
+      (d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain[0].id, plain[0].key)).string())));
+}
+
+// ParaView's Xdmf reader opens the snapshots through the .xmf beside the task's file:
+// every dataset it names must exist in that file with the length it states, one grid
+// per snapshot at the snapshot's time, velocity and spin as 3-vectors.
+TEST(Cli, SnapshotsAreDescribedForParaViewByAnXdmfFileThatMatchesTheHdf5) {
+  TempDir d;
+  json j = json::parse(collision_job("xmf", {0.1}));
+  j["snapshots"] = true;
+  write(d.file("xmf.json"), j.dump());
+  ASSERT_EQ(run_demcal({"run", "xmf.json"}, d.path.string()).rc, 0);
+  const auto task = tasks_of(d.file("demcal.db"), "xmf").at(0);
+  const fs::path h5 = d.path / "demcal-out" / "xmf" / demcal::jobs::task_file_name(task.id, task.key);
+  const std::string xmf = demcal::jobs::xdmf_path_for(h5.string());
+  ASSERT_TRUE(fs::exists(xmf));
+  const Result q = run_demcal({"query", "--job", "xmf", "--format", "json"}, d.path.string());
+  ASSERT_EQ(q.rc, 0) << q.err;
+  EXPECT_EQ(fs::path(json::parse(q.out).at(0).at("xdmf").get<std::string>()), fs::path(xmf));
+  std::ifstream in(xmf);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  H5::H5File f(h5.string(), H5F_ACC_RDONLY);
+  // <DataItem Dimensions="N" ...>FILE:/GROUP/DATASET</DataItem>
+  const std::regex item(R"re(<DataItem Dimensions="(\d+)"[^>]*Format="HDF">([^<:]+):([^<]+)</DataItem>)re");
+  int items = 0;
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), item); it != std::sregex_iterator(); ++it, ++items) {
+    EXPECT_EQ((*it)[2].str(), h5.filename().string());  // relative: the pair moves together
+    const std::string path = (*it)[3].str();
+    ASSERT_TRUE(f.nameExists(path)) << path;
+    hsize_t n = 0;
+    f.openDataSet(path).getSpace().getSimpleExtentDims(&n);
+    EXPECT_EQ(std::to_string(n), (*it)[1].str()) << path;
+  }
+  EXPECT_EQ(items, 2 * 11);  // two snapshots, x y z radius vx vy vz wx wy wz fixed
+  const std::regex grid(R"re(<Grid Name="([^"]+)" GridType="Uniform">\s*<Time Value="([^"]+)"/>)re");
+  std::vector<std::pair<std::string, double>> grids;
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), grid); it != std::sregex_iterator(); ++it)
+    grids.emplace_back((*it)[1].str(), std::stod((*it)[2].str()));
+  ASSERT_EQ(grids.size(), 2u);
+  for (std::size_t s = 0; s < grids.size(); ++s) {
+    H5::Group g = f.openGroup(demcal::jobs::snapshot_group(s));
+    double t = -1;
+    g.openAttribute("TimeValue").read(H5::PredType::NATIVE_DOUBLE, &t);
+    EXPECT_EQ(grids[s].second, t);
+    EXPECT_EQ(grids[s].first, s == 0 ? "initial" : "final");
+  }
+  EXPECT_GT(grids[1].second, grids[0].second);
+  for (const char* v : {"velocity", "spin"})
+    EXPECT_NE(text.find(std::string("<Attribute Name=\"") + v + "\" AttributeType=\"Vector\""), std::string::npos) << v;
+  EXPECT_NE(text.find("Function=\"JOIN($0, $1, $2)\" Dimensions=\"30 3\""), std::string::npos);
 }
 
 TEST(Cli, PlotDrawsPngAndSvg) {
