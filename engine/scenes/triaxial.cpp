@@ -3,6 +3,7 @@
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
+#include "../series_stats.hpp"
 #include "../servo_wall.hpp"
 #include "../timestep.hpp"
 #include "../world.hpp"
@@ -107,6 +108,10 @@ Metrics TriaxialResult::metrics() const {
                      {"eps1_at_peak", eps1_at_peak},
                      {"phi_cv_deg", phi_cv_deg},
                      {"phi_cv_se_deg", phi_cv_se_deg},
+                     {"cv_effective_samples", cv_effective_samples},
+                     {"cv_dilatancy_deg", cv_dilatancy_deg},
+                     {"cv_drift_deg", cv_drift_deg},
+                     {"cv_drift_se_deg", cv_drift_se_deg},
                      {"phi_peak_interior_deg", phi_peak_interior_deg},
                      {"phi_cv_interior_deg", phi_cv_interior_deg},
                      {"q_peak_pa", q_peak},
@@ -259,6 +264,43 @@ std::string fmt(double v, int prec = 4) {
   os.precision(prec);
   os << v;
   return os.str();
+}
+
+// Whether the critical-state window is at critical state: no volume change (the
+// dilatancy angle of the fitted eps_v slope) and no drift of phi_mob (a fitted change
+// across the window larger than its tolerance and than twice its own standard error,
+// which counts the rows' correlation). A window that fails keeps its phi_cv, with a
+// warning that says what moved and what would help: the number is not a critical-state
+// value, and maps and fits built on it inherit that.
+void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& e1, const std::vector<double>& ev,
+                          const std::vector<double>& phi, TriaxialResult& res) {
+  const std::string window = "eps1 " + fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to);
+  const std::string advice =
+      "; shear further (triaxial.axial_strain) or move the window (triaxial.cv_from, triaxial.cv_to)";
+  if (e1.size() >= 3) {
+    const double r = linear_trend(e1, ev).slope;  // compression positive: dilation r < 0
+    res.cv_dilatancy_deg = rad_to_deg(std::asin(std::clamp(-r / (2.0 - r), -1.0, 1.0)));
+    const Trend drift = linear_trend(e1, phi);
+    const double width = e1.back() - e1.front();
+    res.cv_drift_deg = drift.slope * width;
+    res.cv_drift_se_deg = drift.se * width;
+    if (std::abs(res.cv_dilatancy_deg) > cfg.cv_dilatancy_tolerance_deg)
+      res.outcome.warnings.push_back(
+          "not at critical state over " + window + ": the sample still " +
+          (res.cv_dilatancy_deg > 0 ? "dilates" : "contracts") + " (dilatancy angle " + fmt(res.cv_dilatancy_deg, 2) +
+          " deg over the window, |psi| <= " + fmt(cfg.cv_dilatancy_tolerance_deg, 2) +
+          " deg expected), so phi_cv carries dilatancy" + advice);
+    if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
+      res.outcome.warnings.push_back("not at critical state over " + window + ": phi_mob " +
+                                     (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
+                                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) +
+                                     " deg across the window" + advice);
+  }
+  if (res.cv_effective_samples < 4.0)
+    res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +
+                                   fmt(res.cv_effective_samples, 2) +
+                                   " independent samples of phi_mob: phi_cv_se_deg is itself uncertain; a wider "
+                                   "window or replicas pin phi_cv down");
 }
 
 // Servo all six walls to p0 until equilibrium (two consecutive passing checks).
@@ -548,7 +590,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
   // The walls' angles, and the same from the interior Love-Weber stress.
   double best = -1.0, best_in = -1.0, cv_in = 0.0;
-  std::vector<double> cv;
+  std::vector<double> cv, cv_e1, cv_ev, cv_phi;
   for (const auto& r : s.rows) {
     const double x = mobilised_sine(r[c_s1], r[c_s2], r[c_s3]);
     const double x_in = mobilised_sine(r[c_zz], r[c_xx], r[c_yy]);
@@ -561,6 +603,9 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) {
       cv.push_back(x);
       cv_in += x_in;
+      cv_e1.push_back(r[c_e1]);
+      cv_ev.push_back(r[c_ev]);
+      cv_phi.push_back(sine_to_deg(x));
     }
     res.max_inertial_number = std::max(res.max_inertial_number, r[c_in]);
   }
@@ -568,26 +613,12 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   res.phi_peak_interior_deg = sine_to_deg(best_in);
   res.cv_samples = static_cast<int>(cv.size());
   if (!cv.empty()) {
-    double mean = 0.0;
-    for (double x : cv) mean += x;
-    mean /= static_cast<double>(cv.size());
-    res.phi_cv_deg = sine_to_deg(mean);
+    const MeanEstimate est = correlated_mean(cv);
+    res.phi_cv_deg = sine_to_deg(est.mean);
     res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
-    // Successive rows are correlated: the standard error comes from block means.
-    const std::size_t nb = std::min<std::size_t>(10, cv.size() / 3);
-    if (nb >= 2) {
-      const std::size_t bs = cv.size() / nb;
-      std::vector<double> bm(nb, 0.0);
-      for (std::size_t b = 0; b < nb; ++b) {
-        for (std::size_t k = 0; k < bs; ++k) bm[b] += cv[b * bs + k];
-        bm[b] /= static_cast<double>(bs);
-      }
-      double bmean = 0.0, var = 0.0;
-      for (double x : bm) bmean += x / static_cast<double>(nb);
-      for (double x : bm) var += (x - bmean) * (x - bmean) / static_cast<double>(nb - 1);
-      const double se_ratio = std::sqrt(var / static_cast<double>(nb));
-      res.phi_cv_se_deg = rad_to_deg(se_ratio / std::sqrt(std::max(1e-12, 1.0 - mean * mean)));
-    }
+    res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
+    res.cv_effective_samples = est.effective_samples;
+    judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
   } else {
     res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
     res.phi_cv_deg = NAN;

@@ -95,6 +95,11 @@ struct TriaxialConfig {
   double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
   double quasi_static_inertial = 1e-3;       // warn above this inertial number
   double dilatancy_window = 0.01;            // eps1 span of the dilatancy-angle difference
+  // Critical state is shear without volume change at a steady stress ratio: the
+  // window is judged by its dilatancy angle (from the slope of eps_v on eps1) and by
+  // how far phi_mob drifts across it (when the drift is also > 2 of its standard errors).
+  double cv_dilatancy_tolerance_deg = 5.0;
+  double cv_drift_tolerance_deg = 2.0;
 
   std::uint64_t seed = 1;
   int threads = 1;
@@ -125,7 +130,13 @@ struct TriaxialResult {
 
   // Metrics (meaningful only when outcome.ok())
   double phi_peak_deg = 0, eps1_at_peak = 0;
-  double phi_cv_deg = 0, phi_cv_se_deg = 0;  // standard error from block means over the window
+  // phi_cv: the angle of the mean stress ratio over the window; its standard error
+  // counts the rows' correlation (integrated autocorrelation time): the noise of this
+  // run only, not the scatter between packings (replicas measure that).
+  double phi_cv_deg = 0, phi_cv_se_deg = 0;
+  double cv_effective_samples = 0;  // window rows / (2 tau)
+  double cv_dilatancy_deg = 0;      // asin(-r / (2 - r)), r = d eps_v / d eps1 fitted over the window
+  double cv_drift_deg = 0, cv_drift_se_deg = 0;  // change of phi_mob across the window, fitted
   // The same two angles from the interior Love-Weber stress (contact forces only).
   // They differ from the walls' where body forces carry load: local damping left on
   // in shear opposes the systematic deformation and holds part of the axial load.

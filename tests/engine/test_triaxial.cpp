@@ -325,6 +325,34 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   EXPECT_LT(r.phi_cv_se_deg, std::sqrt(var));
 }
 
+// A dense sample at eps1 = 0.10-0.15 still dilates: the window's dilatancy angle (the
+// fitted slope of eps_v) says so, and the result warns that phi_cv is not a
+// critical-state value.
+TEST(TriaxialScene, AWindowBeforeCriticalStateIsFlagged) {
+  const TriaxialResult& r = cached("dense");
+  ASSERT_TRUE(r.outcome.ok());
+  std::vector<double> e1, ev;
+  for (std::size_t i = 0; i < r.series.rows.size(); ++i) {
+    const double e = col(r, i, "eps1");
+    if (e < 0.10 - 1e-9 || e > 0.15 + 1e-9) continue;
+    e1.push_back(e);
+    ev.push_back(col(r, i, "eps_v"));
+  }
+  ASSERT_GT(e1.size(), 5u);
+  double m1 = 0, mv = 0;
+  for (std::size_t i = 0; i < e1.size(); ++i) m1 += e1[i] / e1.size(), mv += ev[i] / e1.size();
+  double sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < e1.size(); ++i) sxx += (e1[i] - m1) * (e1[i] - m1), sxy += (e1[i] - m1) * (ev[i] - mv);
+  const double rate = sxy / sxx;
+  EXPECT_NEAR(r.cv_dilatancy_deg, std::asin(-rate / (2.0 - rate)) * 180.0 / M_PI, 1e-9);
+  EXPECT_GT(r.cv_dilatancy_deg, 5.0);  // dilating, as a dense sample does before critical state
+  bool warned = false;
+  for (const auto& w : r.outcome.warnings) warned |= w.find("not at critical state over eps1 0.1-0.15") == 0;
+  EXPECT_TRUE(warned) << r.outcome.message;
+  EXPECT_GT(r.cv_effective_samples, 1.0);
+  EXPECT_LE(r.cv_effective_samples, r.cv_samples);
+}
+
 TEST(TriaxialScene, QuasiStaticWarningAboveTheInertialLimit) {
   const TriaxialResult& r = cached("dense");  // I = 2.3e-3 at 3e-4 /s
   ASSERT_TRUE(r.outcome.ok());
