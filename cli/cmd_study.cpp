@@ -113,16 +113,16 @@ int study(const StudyArgs& a) {
   const jobs::TimestepStudy s = jobs::run_timestep_study(store, o);
   std::cout << "job " << s.job << " in " << a.db << ": " << s.tasks << " tasks (" << s.reused << " reused, " << s.ran
             << " run now)\n";
-  std::cout << "series           dt_factor  status    drift/sim-s    wall-s/sim-s  pareto\n";
+  std::cout << "series           dt_factor  status    drift/sim-s (worst)  mean +- sd of replicas   wall-s/sim-s  pareto\n";
   for (const auto& p : s.points) {
-    char line[200];
+    char line[240];
     if (p.ok)
-      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12.3e  %12.3e  %s\n",
-                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, "ok", p.drift, p.cost,
-                    p.pareto ? "*" : "");
+      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19.3e  %10.2e +- %8.2e  %12.3e  %s\n",
+                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, "ok", p.drift, p.drift_mean,
+                    p.drift_sd, p.cost, p.pareto ? "*" : "");
     else  // an unstable run has no drift or cost to show
-      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %12s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
-                    p.dt_factor, "unstable", "-", "-");
+      std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19s  %22s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
+                    p.dt_factor, "unstable", "-", "-", "-");
     std::cout << line;
   }
   std::cout << s.recommendation << "\n";

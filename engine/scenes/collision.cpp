@@ -6,6 +6,7 @@
 #include "../timestep.hpp"
 #include "../world.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -165,13 +166,16 @@ TimestepSweep sweep_timestep(const CollisionConfig& base, const std::vector<doub
                              Observer* obs) {
   TimestepSweep sw;
   sw.factors = factors;
-  for (double k : factors) {
+  std::sort(sw.factors.begin(), sw.factors.end());
+  bool all_passed = true;  // a pass beyond a failure is luck, not a recommendation
+  for (double k : sw.factors) {
     CollisionConfig c = base;
     c.dt = 0.0;
     c.dt_factor = k;
     c.allow_unstable_dt = true;
     CollisionResult r = run_collision(c, obs);
-    if (r.outcome.ok() && std::abs(r.drift_per_million_steps) <= tolerance && k > sw.recommended_factor) {
+    all_passed = all_passed && r.outcome.ok() && std::abs(r.drift_per_million_steps) <= tolerance;
+    if (all_passed) {
       sw.recommended_factor = k;
       sw.recommended_dt = r.dt;
     }

@@ -56,9 +56,9 @@ struct CollisionResult {
 
 CollisionResult run_collision(const CollisionConfig& config, Observer* observer = nullptr);
 
-// Runs the test at each dt factor; the recommended factor is the largest whose
-// |drift| stays within `tolerance` (relative per million steps) and whose run was
-// stable.
+// Runs the test at each dt factor, smallest first (`factors` comes back sorted); the
+// recommended factor is the largest such that at it and at every smaller factor the
+// run was stable with |drift| within `tolerance` (relative per million steps).
 struct TimestepSweep {
   std::vector<double> factors;
   std::vector<CollisionResult> runs;

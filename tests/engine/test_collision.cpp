@@ -81,6 +81,24 @@ TEST(CollisionScene, SweepRecommendsTheLargestStepWithinTolerance) {
   EXPECT_EQ(s.recommended_dt, s.runs[1].dt);
 }
 
+TEST(CollisionScene, SweepStopsAtTheFirstFailureAndSortsTheFactors) {
+  CollisionConfig c = small();
+  c.steps = 10000;
+  // 2.5 fails (unstable); 0.05 and 0.2 pass. Given out of order, the sweep runs them
+  // smallest first.
+  const TimestepSweep s = sweep_timestep(c, {2.5, 0.2, 0.05}, 1e-2);
+  ASSERT_EQ(s.factors, (std::vector<double>{0.05, 0.2, 2.5}));
+  EXPECT_EQ(s.recommended_factor, 0.2);
+  // On this gas the drift per million steps is noise at these factors: 0.05 drifts
+  // more than 0.2 (deterministic for the seed). A tolerance between the two fails 0.05
+  // and passes 0.2, and a pass beyond a failure is luck: nothing is recommended.
+  const double d_small = std::abs(s.runs[0].drift_per_million_steps), d_large = std::abs(s.runs[1].drift_per_million_steps);
+  ASSERT_GT(d_small, d_large) << "the test needs the smaller factor to drift more";
+  const TimestepSweep t = sweep_timestep(c, {0.05, 0.2}, 0.5 * (d_small + d_large));
+  EXPECT_EQ(t.recommended_factor, 0.0);
+  EXPECT_EQ(t.recommended_dt, 0.0);
+}
+
 TEST(CollisionScene, InvalidConfigNamesTheField) {
   CollisionConfig c = small();
   c.solid_fraction = 0.9;
