@@ -62,6 +62,35 @@ Coordination coordination(const World& world) {
   return out;
 }
 
+Coordination coordination(const World& world, const Region& region) {
+  const Particles& p = world.particles();
+  std::vector<int> z(p.size(), 0);
+  std::vector<char> inside(p.size(), 0);
+  for (std::size_t i = 0; i < p.size(); ++i) inside[i] = !p.fixed[i] && region.contains(p.x[i]);
+  long nc = 0;
+  world.for_each_contact([&](const ContactView& c) {
+    const bool in_i = inside[c.i], in_j = c.j >= 0 && inside[c.j];
+    if (!in_i && !in_j) return;
+    ++nc;
+    ++z[c.i];
+    if (c.j >= 0) ++z[c.j];
+  });
+  long np = 0, n0 = 0, n1 = 0, zsum = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!inside[i]) continue;
+    ++np;
+    zsum += z[i];
+    n0 += z[i] == 0;
+    n1 += z[i] == 1;
+  }
+  Coordination out;
+  out.contacts = nc;
+  out.rattlers = n0 + n1;
+  if (np > 0) out.all = static_cast<double>(zsum) / static_cast<double>(np);
+  if (np - n0 - n1 > 0) out.mechanical = static_cast<double>(zsum - n1) / static_cast<double>(np - n0 - n1);
+  return out;
+}
+
 double unbalanced_force_ratio(const World& world) {
   const Particles& p = world.particles();
   double fsum = 0.0;

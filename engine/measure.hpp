@@ -36,6 +36,12 @@ struct Coordination {
   long rattlers = 0;
 };
 Coordination coordination(const World& world);
+// The same over the grains whose centres lie in `region` (seed Eq. 2.8 over the
+// Love-Weber volume): every contact of such a grain counts, with grains outside the
+// region and with walls. Over the whole box, grains at the walls lose the contacts
+// the walls give them and read as rattlers; on a 1,000-grain sample that is 4.52
+// against 5.27 in the interior after preparation.
+Coordination coordination(const World& world, const Region& region);
 
 // Mean |net force| over mobile grains / mean |contact force|: 0 in static equilibrium.
 double unbalanced_force_ratio(const World& world);

@@ -389,9 +389,11 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   res.series.name = "triaxial";
   res.series.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
                         "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
-                        "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step"};
+                        "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step",
+                        "z_interior", "z_mech_interior"};
   res.series.units = {"1",  "1",  "1",  "1",   "1",   "1",  "Pa", "Pa", "Pa", "Pa", "Pa", "1", "deg",
-                      "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1"};
+                      "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1",
+                      "1",  "1"};
 
   // Sample: diameters uniform in [d_min, d_max], random insertion at a low solid fraction.
   const Material& mat = cfg.material;
@@ -510,6 +512,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       const Mat3 lw = interior_stress(world, rig.interior(), n_in);
       const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
       const Coordination z = coordination(world);
+      const Coordination z_in = coordination(world, rig.interior());
       const double ufr = unbalanced_force_ratio(world);
       const double inertial = inertial_number(cfg.strain_rate, res.d_mean, rho, pm);
       for (int f = 0; f < 4; ++f) {
@@ -523,7 +526,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
                       sine_to_deg(mobilised_sine(s1, s2, s3)), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
                       z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
-                      static_cast<double>(world.step_count())},
+                      static_cast<double>(world.step_count()), z_in.all, z_in.mechanical},
                      obs);
       return e1;
     };

@@ -179,6 +179,15 @@ void add_coordination(const engine::Series& s, engine::Metrics& m) {
     m.emplace_back("coordination_final", s.rows.back().at(static_cast<std::size_t>(z_all)));
   }
   if (z_mech >= 0) m.emplace_back("coordination_mech_final", s.rows.back().at(static_cast<std::size_t>(z_mech)));
+  // Over the Love-Weber volume, free of the walls' deficit: the values to compare
+  // with the seed's Eq. 2.8.
+  const long z_in = col("z_interior"), z_mech_in = col("z_mech_interior");
+  if (z_in >= 0) {
+    m.emplace_back("coordination_interior_initial", s.rows.front().at(static_cast<std::size_t>(z_in)));
+    m.emplace_back("coordination_interior_final", s.rows.back().at(static_cast<std::size_t>(z_in)));
+  }
+  if (z_mech_in >= 0)
+    m.emplace_back("coordination_mech_interior_final", s.rows.back().at(static_cast<std::size_t>(z_mech_in)));
 }
 
 SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {

@@ -667,3 +667,28 @@ TEST(Measurements, CoordinationAndEnergiesOfAKnownPair) {
   EXPECT_NEAR(e.translational, 0.5 * mass_of(1e-3), 1e-15);
   EXPECT_NEAR(e.normal, 0.5 * 3e7 * 1e-6 * 1e-6, 1e-15);
 }
+
+// Over a region, a grain counts every contact it has, with grains outside the region
+// and with walls: a chain floor - a - b - c with only a and b inside reads Z = 2 for
+// both (a: floor and b; b: a and c), where the whole-box count gives a only one.
+TEST(Measurements, CoordinationOverARegionCountsContactsWithWallsAndOutsiders) {
+  Particles p;
+  p.add(Vec3(0, 0, 0.999e-3), 1e-3, kDensity);    // a, on the floor
+  p.add(Vec3(0, 0, 2.998e-3), 1e-3, kDensity);    // b, on a
+  p.add(Vec3(0, 0, 4.997e-3), 1e-3, kDensity);    // c, on b, outside the region
+  p.add(Vec3(0.5, 0, 2e-3), 1e-3, kDensity);      // d, inside, touching nothing
+  std::vector<Wall> walls = {plane("floor", Vec3::Zero(), Vec3(0, 0, 1))};
+  World w(std::move(p), std::move(walls), open_domain(), law(3e7, 0.0), options(safe_dt()));
+  w.refresh();
+  Region r;
+  r.lo = Vec3(-1, -1, 0);
+  r.hi = Vec3(1, 1, 4e-3);
+  const Coordination in = coordination(w, r);
+  EXPECT_EQ(in.contacts, 3);     // floor-a, a-b, b-c
+  EXPECT_NEAR(in.all, 4.0 / 3.0, 1e-12);  // a 2, b 2, d 0
+  EXPECT_EQ(in.rattlers, 1);     // d
+  EXPECT_NEAR(in.mechanical, 2.0, 1e-12);
+  const Coordination box = coordination(w);
+  EXPECT_EQ(box.contacts, 2);    // pair contacts only
+  EXPECT_NEAR(box.all, 1.0, 1e-12);  // a 1, b 2, c 1, d 0
+}
