@@ -123,9 +123,9 @@ int main(int argc, char** argv) {
     if (FILE* f = std::fopen((out + "_fit.txt").c_str(), "w")) {
       // gnuplot-readable: floor level, fit line h = a + b x over [x_upper, x_lower]
       std::fprintf(f, "floor_level=%.6e\nfit_a=%.6e\nfit_b=%.6e\nfit_x1=%.6e\nfit_x2=%.6e\nrepose=%.3f\nfit_err=%.3f\n"
-                   "steepest=%.3f\nfront=%.6e\n",
+                   "steepest=%.3f\nfront=%.6e\nrepose_upper=%.3f\nrepose_lower=%.3f\n",
                    r.floor_level, r.fit_intercept, r.fit_slope, r.fit_x_upper, r.fit_x_lower, r.repose_deg,
-                   r.repose_fit_err_deg, r.steepest_deg, r.front_m);
+                   r.repose_fit_err_deg, r.steepest_deg, r.front_m, r.repose_upper_deg, r.repose_lower_deg);
       std::fclose(f);
     }
   }

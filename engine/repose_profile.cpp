@@ -1,5 +1,7 @@
 #include "repose_profile.hpp"
 
+#include "series_stats.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -39,6 +41,25 @@ Line least_squares(const double* x, const double* h, int n) {
   }
   l.ok = true;
   return l;
+}
+
+// The bins of [i_up, i_low] whose heights lie in [bottom, top].
+void select_between(const std::vector<double>& x, const std::vector<double>& h, int i_up, int i_low, double bottom,
+                    double top, std::vector<double>& xs, std::vector<double>& hs) {
+  for (int i = i_up; i <= i_low; ++i) {
+    if (h[i] < bottom || h[i] > top) continue;
+    xs.push_back(x[i]);
+    hs.push_back(h[i]);
+  }
+}
+
+double angle_between(const std::vector<double>& x, const std::vector<double>& h, int i_up, int i_low, double bottom,
+                     double top) {
+  std::vector<double> xs, hs;
+  select_between(x, h, i_up, i_low, bottom, top, xs, hs);
+  if (xs.size() < 3) return NAN;
+  const Line l = least_squares(xs.data(), hs.data(), static_cast<int>(xs.size()));
+  return l.ok ? rad_to_deg(std::atan(std::abs(l.slope))) : NAN;
 }
 
 }  // namespace
@@ -97,11 +118,7 @@ SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, d
   f.x_upper = x[i_up];
   f.x_lower = x[i_low];
   std::vector<double> xs, hs;
-  for (int i = i_up; i <= i_low; ++i) {
-    if (h[i] < bottom || h[i] > top) continue;
-    xs.push_back(x[i]);
-    hs.push_back(h[i]);
-  }
+  select_between(x, h, i_up, i_low, bottom, top, xs, hs);
   f.points = static_cast<int>(xs.size());
   if (f.points < 3) {
     f.why = "fewer than 3 profile bins between the fit fractions";
@@ -115,9 +132,14 @@ SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, d
   f.ok = true;
   f.slope = l.slope;
   f.intercept = l.intercept;
-  f.slope_se = l.slope_se;
+  // Neighbouring bins share grains and the heap is not quite straight: residuals are
+  // correlated, and the regression's own error would count them as independent.
+  f.slope_se = linear_trend(xs, hs).se;
   f.angle_deg = rad_to_deg(std::atan(std::abs(l.slope)));
-  f.angle_err_deg = rad_to_deg(l.slope_se / (1.0 + l.slope * l.slope));
+  f.angle_err_deg = rad_to_deg(f.slope_se / (1.0 + l.slope * l.slope));
+  const double mid = 0.5 * (top + bottom);
+  f.upper_angle_deg = angle_between(x, h, i_up, i_low, mid, top);
+  f.lower_angle_deg = angle_between(x, h, i_up, i_low, bottom, mid);
   return f;
 }
 

@@ -39,9 +39,14 @@ struct SlopeFit {
   int points = 0;            // bins used
   double slope = 0.0;        // dh/dx of the line (negative for a heap sloping to +x)
   double intercept = 0.0;    // h at x = 0
-  double slope_se = 0.0;     // standard error of the slope (regression)
+  double slope_se = 0.0;     // standard error of the slope, widened by the residuals' correlation
   double angle_deg = 0.0;    // atan(|slope|)
   double angle_err_deg = 0.0;  // standard error of the angle: se / (1 + slope^2)
+  // The same fit over the upper and the lower half of the height range (split at
+  // (f_lo + f_hi) / 2): the seed's error bars are two measurements at different
+  // places on the slope, and a concave heap reads steeper near its crest. NaN when a
+  // half holds fewer than 3 bins.
+  double upper_angle_deg = 0.0, lower_angle_deg = 0.0;
 };
 SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, double f_lo, double f_hi);
 

@@ -223,13 +223,15 @@ Metrics ReposeResult::metrics() const {
                  {"repose_fit_err_deg", repose_fit_err_deg},
                  {"steepest_deg", steepest_deg},
                  {"fit_points", static_cast<double>(fit_points)},
+                 {"repose_upper_deg", repose_upper_deg},
+                 {"repose_lower_deg", repose_lower_deg},
                  {"runout_m", runout_m},
                  {"runout_ratio", runout_ratio},
                  {"front_m", front_m},
                  {"final_height_m", final_height_m},
                  {"time_to_rest_s", time_to_rest_s},
                  {"reached_end_wall", reached_end_wall ? 1.0 : 0.0}};
-    if (!std::isfinite(repose_deg)) r.erase(r.begin(), r.begin() + 4);  // no fit: no angle
+    if (!std::isfinite(repose_deg)) r.erase(r.begin(), r.begin() + 6);  // no fit: no angle
     m.insert(m.begin(), r.begin(), r.end());
   }
   return m;
@@ -548,6 +550,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
         res.repose_deg = fit.angle_deg;
         res.repose_fit_err_deg = fit.angle_err_deg;
         res.fit_points = fit.points;
+        res.repose_upper_deg = fit.upper_angle_deg;
+        res.repose_lower_deg = fit.lower_angle_deg;
         res.fit_slope = fit.slope;
         res.fit_intercept = fit.intercept;
         res.fit_x_upper = fit.x_upper;

@@ -119,7 +119,7 @@ struct StageReport {
   bool converged = false;   // prep stages: the equilibrium test passed; shear: reached the strain
   long steps = 0;
   double time_s = 0;        // simulated
-  double stress_error = 0;  // max over servo-held walls of |sigma - target| / p0 at the end
+  double stress_error = 0;  // max over servo-held walls of |sigma - target| / target at the end (the stage's own target: 100 p0 in the dense compression)
   double ufr = 0;           // unbalanced-force ratio at the end
   double porosity = 0;      // at the end
   double mean_stress = 0;   // p from the walls at the end [Pa]

@@ -161,8 +161,8 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 
 SceneDef scene_repose() {
   return SceneDef{kSection, repose_params(), resolve, run,
-                  /*headline=*/{"repose_deg", "repose_fit_err_deg", "runout_ratio", "time_to_rest_s", "particles",
-                                "wall_s"},
+                  /*headline=*/{"repose_deg", "repose_fit_err_deg", "repose_upper_deg", "repose_lower_deg", "runout_ratio",
+                                "time_to_rest_s", "particles", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
                   /*advice=*/nullptr};
 }

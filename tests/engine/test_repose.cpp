@@ -126,6 +126,38 @@ TEST(ReposeProfile, FitExcludesCrestAndToe) {
   EXPECT_NEAR(f.angle_deg, 30.0, 0.3);
 }
 
+// A concave heap (seed Fig. 2.15's error bars are two measurements at different places
+// on the slope): 30 deg above half its height, 20 deg below. The whole-range fit lies
+// between; the halves recover each flank, and the fit's error is no longer the few
+// hundredths of a degree a straight-line regression claims for a curved profile.
+TEST(ReposeProfile, UpperAndLowerHalvesOfAConcaveHeapReadTheirOwnAngles) {
+  const double h0 = 0.04, x_crest = 0.01, t30 = std::tan(deg_to_rad(30.0)), t20 = std::tan(deg_to_rad(20.0));
+  const double x_knee = x_crest + 0.5 * h0 / t30;
+  std::vector<double> x, h;
+  for (double xi = 0.0005; xi < 0.2; xi += 0.001) {
+    double hi = h0;
+    if (xi > x_crest) hi = h0 - t30 * (xi - x_crest);
+    if (xi > x_knee) hi = 0.5 * h0 - t20 * (xi - x_knee);
+    x.push_back(xi);
+    h.push_back(std::max(0.0, hi));
+  }
+  const SlopeFit f = fit_slope(x, h, 0.2, 0.8);
+  ASSERT_TRUE(f.ok) << f.why;
+  EXPECT_NEAR(f.upper_angle_deg, 30.0, 0.5);  // bins straddling the knee pull a little
+  EXPECT_NEAR(f.lower_angle_deg, 20.0, 0.5);
+  EXPECT_GT(f.angle_deg, 21.0);
+  EXPECT_LT(f.angle_deg, 29.0);
+  std::printf("[ report   ] concave heap: fit %.2f +- %.2f deg, upper %.2f, lower %.2f\n", f.angle_deg, f.angle_err_deg,
+              f.upper_angle_deg, f.lower_angle_deg);
+  // Residuals of one sign for many bins in a row: 1.17 deg, where the plain regression
+  // error, which takes them as independent, claims 0.33.
+  EXPECT_GT(f.angle_err_deg, 0.8);
+  // A half with fewer than 3 bins has no angle.
+  const SlopeFit coarse = fit_slope({0.0, 0.01, 0.02, 0.03, 0.04, 0.05}, {0.05, 0.04, 0.03, 0.02, 0.01, 0.0}, 0.2, 0.8);
+  ASSERT_TRUE(coarse.ok) << coarse.why;
+  EXPECT_TRUE(std::isnan(coarse.upper_angle_deg));
+}
+
 TEST(ReposeProfile, FrontIgnoresDetachedBouncers) {
   std::vector<Vec3> pos;
   std::vector<double> rad;
