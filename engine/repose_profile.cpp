@@ -57,7 +57,9 @@ double angle_between(const std::vector<double>& x, const std::vector<double>& h,
                      double top) {
   std::vector<double> xs, hs;
   select_between(x, h, i_up, i_low, bottom, top, xs, hs);
-  if (xs.size() < 3) return NAN;
+  // A line through a handful of bins of a rough profile is noise (the quick column's
+  // halves of 4-5 bins read 9-31 deg around a 25 deg heap): no angle below 6.
+  if (xs.size() < 6) return NAN;
   const Line l = least_squares(xs.data(), hs.data(), static_cast<int>(xs.size()));
   return l.ok ? rad_to_deg(std::atan(std::abs(l.slope))) : NAN;
 }

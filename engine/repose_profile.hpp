@@ -45,7 +45,8 @@ struct SlopeFit {
   // The same fit over the upper and the lower half of the height range (split at
   // (f_lo + f_hi) / 2): the seed's error bars are two measurements at different
   // places on the slope, and a concave heap reads steeper near its crest. NaN when a
-  // half holds fewer than 3 bins.
+  // half holds fewer than 6 bins (the seed column's halves hold ~20; a quick
+  // column's 4-5 bins give noise).
   double upper_angle_deg = 0.0, lower_angle_deg = 0.0;
 };
 SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, double f_lo, double f_hi);

@@ -152,10 +152,19 @@ TEST(ReposeProfile, UpperAndLowerHalvesOfAConcaveHeapReadTheirOwnAngles) {
   // Residuals of one sign for many bins in a row: 1.17 deg, where the plain regression
   // error, which takes them as independent, claims 0.33.
   EXPECT_GT(f.angle_err_deg, 0.8);
-  // A half with fewer than 3 bins has no angle.
-  const SlopeFit coarse = fit_slope({0.0, 0.01, 0.02, 0.03, 0.04, 0.05}, {0.05, 0.04, 0.03, 0.02, 0.01, 0.0}, 0.2, 0.8);
+  // A half with fewer than 6 bins has no angle.
+  // A 45 deg heap in 5 mm bins: 7 bins in the fit, 4 in each half.
+  std::vector<double> cx, ch;
+  for (int i = 0; i <= 10; ++i) {
+    cx.push_back(0.005 * i);
+    ch.push_back(0.05 - 0.005 * i);
+  }
+  const SlopeFit coarse = fit_slope(cx, ch, 0.2, 0.8);
   ASSERT_TRUE(coarse.ok) << coarse.why;
+  EXPECT_EQ(coarse.points, 7);
+  EXPECT_NEAR(coarse.angle_deg, 45.0, 1e-9);
   EXPECT_TRUE(std::isnan(coarse.upper_angle_deg));
+  EXPECT_TRUE(std::isnan(coarse.lower_angle_deg));
 }
 
 TEST(ReposeProfile, FrontIgnoresDetachedBouncers) {
