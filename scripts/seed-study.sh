@@ -93,15 +93,18 @@ table_row() {
 
 # repose_table CSV: the Fig. 2.15 rows of one repose job beside the seed's values.
 repose_table() {
-  echo "| η | seed (Fig. 2.15, read off) | demcal repose (fit ± err) | steepest | runout ratio |"
-  echo "| --- | --- | --- | --- | --- |"
+  # Upper / lower: the fit over the upper and lower half of its heights (the seed's
+  # two measurements); steepest: a 5 d window, mostly surface roughness (validation.md).
+  echo "| η | seed (Fig. 2.15, read off) | demcal repose (fit ± err) | upper / lower half | steepest | runout ratio |"
+  echo "| --- | --- | --- | --- | --- | --- |"
   declare -A seed_rep=([0.0]="25–27°" [0.1]="31.3°" [0.3]="between (rises slowly)" [0.5]="between (rises slowly)" [1.0]="36–38°")
-  col "$1" eta repose_deg repose_fit_err_deg steepest_deg runout_ratio |
-    while IFS=$'\t' read -r eta rep err steep ratio; do
+  col "$1" eta repose_deg repose_fit_err_deg repose_upper_deg repose_lower_deg steepest_deg runout_ratio |
+    while IFS=$'\t' read -r eta rep err up low steep ratio; do
       key=$(awk -v e="$eta" 'BEGIN { printf "%.1f", e }')
-      if [[ -z "$rep" ]]; then echo "| $eta | ${seed_rep[$key]:-} | failed | | |"
-      else awk -v e="$eta" -v s="${seed_rep[$key]:-}" -v r="$rep" -v f="$err" -v t="$steep" -v q="$ratio" \
-        'BEGIN { printf "| %s | %s | %.1f ± %.1f° | %.1f° | %.2f |\n", e, s, r, f, t, q }'; fi
+      if [[ -z "$rep" ]]; then echo "| $eta | ${seed_rep[$key]:-} | failed | | | |"
+      else awk -v e="$eta" -v s="${seed_rep[$key]:-}" -v r="$rep" -v f="$err" -v u="$up" -v l="$low" -v t="$steep" \
+               -v q="$ratio" 'function a(x) { return x == "" ? "—" : sprintf("%.1f°", x) }
+        BEGIN { printf "| %s | %s | %.1f ± %.1f° | %s / %s | %.1f° | %.2f |\n", e, s, r, f, a(u), a(l), t, q }'; fi
     done
 }
 
