@@ -98,8 +98,10 @@ repose_table() {
   echo "| η | seed (Fig. 2.15, read off) | demcal repose (fit ± err) | upper / lower half | steepest | runout ratio |"
   echo "| --- | --- | --- | --- | --- | --- |"
   declare -A seed_rep=([0.0]="25–27°" [0.1]="31.3°" [0.3]="between (rises slowly)" [0.5]="between (rises slowly)" [1.0]="36–38°")
-  col "$1" eta repose_deg repose_fit_err_deg repose_upper_deg repose_lower_deg steepest_deg runout_ratio |
-    while IFS=$'\t' read -r eta rep err up low steep ratio; do
+  # (';' not a tab between fields: read collapses runs of whitespace separators, and
+  # a half without an angle is an empty field.)
+  col "$1" eta repose_deg repose_fit_err_deg repose_upper_deg repose_lower_deg steepest_deg runout_ratio | tr '\t' ';' |
+    while IFS=';' read -r eta rep err up low steep ratio; do
       key=$(awk -v e="$eta" 'BEGIN { printf "%.1f", e }')
       if [[ -z "$rep" ]]; then echo "| $eta | ${seed_rep[$key]:-} | failed | | | |"
       else awk -v e="$eta" -v s="${seed_rep[$key]:-}" -v r="$rep" -v f="$err" -v u="$up" -v l="$low" -v t="$steep" \
