@@ -10,6 +10,7 @@ double autocorrelation_time(const std::vector<double>& x, double mean) {
   const std::size_t n = x.size();
   double c0 = 0.0;
   for (double v : x) c0 += (v - mean) * (v - mean);
+  if (!std::isfinite(c0)) return NAN;  // a NaN or infinite sample: no time to speak of
   if (c0 <= 0.0) return 0.5;
   double tau = 0.5;
   std::size_t window = 0;

@@ -19,7 +19,8 @@ struct MeanEstimate {
 // informative than independent samples); se = sd * sqrt(2 tau / n). On AR(1) series
 // of 100 rows with tau = 4.5, mean +- 1.96 se covers the truth in 89% of series
 // (tests/engine/test_series_stats.cpp): 10-odd effective samples cannot do better.
-// Fewer than 2 samples: se = 0, effective_samples = n.
+// Fewer than 2 samples: se = 0, effective_samples = n. A non-finite sample makes
+// se, tau and effective_samples NaN.
 MeanEstimate correlated_mean(const std::vector<double>& x);
 
 struct Trend {

@@ -85,39 +85,6 @@ void critical_factors(TimestepStudy& s) {
   s.critical_factor_frictionless = nofric.governing().dt_critical / nofric.base_step;
 }
 
-// One factor of one series over its replicas: failed if any replica failed; else the
-// worst replica's drift (what the recommendation judges), the mean and spread beside it.
-TimestepPoint timestep_point(bool friction, double factor, const std::vector<ResultRow>& rows) {
-  TimestepPoint p;
-  p.friction = friction;
-  p.dt_factor = factor;
-  p.replicas = static_cast<int>(rows.size());
-  p.ok = !rows.empty();
-  std::vector<double> drifts;
-  for (const ResultRow& r : rows) {
-    const double drift = r.task.status == "done" ? metric(r, "drift_per_simulated_s") : NAN;
-    if (!std::isfinite(drift)) {
-      p.ok = false;
-      if (p.error.empty()) p.error = r.task.error.empty() ? "drift not finite" : r.task.error;
-      continue;
-    }
-    drifts.push_back(drift);
-    p.dt = metric(r, "dt");
-    p.max_relative_error = std::max(p.max_relative_error, metric(r, "max_relative_error"));
-    p.cost += metric(r, "wall_s_per_simulated_s") / static_cast<double>(rows.size());
-  }
-  if (!p.ok || drifts.empty()) return p;
-  p.drift = drifts.front();
-  for (double d : drifts) {
-    p.drift_mean += d / static_cast<double>(drifts.size());
-    if (friction ? d > p.drift : std::abs(d) > std::abs(p.drift)) p.drift = d;
-  }
-  for (double d : drifts)
-    p.drift_sd += drifts.size() > 1 ? (d - p.drift_mean) * (d - p.drift_mean) / static_cast<double>(drifts.size() - 1) : 0.0;
-  p.drift_sd = std::sqrt(p.drift_sd);
-  return p;
-}
-
 void mark_pareto(std::vector<TimestepPoint>& pts) {
   // Frictionless only: with friction the drift is mostly physical dissipation, not error.
   for (auto& p : pts) {
@@ -160,12 +127,14 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
     std::ofstream c(csv);
     c << "series,dt_factor,dt,status,failure,drift_per_simulated_s,max_relative_error,wall_s_per_simulated_s,pareto,error,"
          "replicas,drift_mean,drift_sd\n";
-    c.precision(6);
-    for (const auto& p : s.points)
-      c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << p.dt << ","
-        << (p.ok ? "ok" : "unstable") << "," << (failed(p, s.tolerance) ? 1 : 0) << "," << p.drift << "," << p.max_relative_error << "," << p.cost << ","
-        << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120) << "\"," << p.replicas << "," << p.drift_mean << ","
-        << p.drift_sd << "\n";
+    for (const auto& p : s.points) {
+      // A failed point has no drift, error or cost to give: nan, not a 0 that reads as exact.
+      const auto v = [&](double x) { return p.ok ? fmt(x, 6) : std::string("nan"); };
+      c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << v(p.dt) << ","
+        << (p.ok ? "ok" : "unstable") << "," << (failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
+        << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
+        << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
+    }
   }
   s.files.push_back(csv.string());
 
@@ -226,7 +195,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
         << "set label 5 'recommended k = " << fmt(s.recommended_factor) << "' at " << s.recommended_factor
         << ", graph 0.82 center tc rgb '#2ca02c'\n";
     g << "plot " << dq << " index 0 using 1:2 with linespoints pt 7 lc rgb '#1f77b4' title 'frictionless', "
-      << dq << " index 1 using 1:2 with linespoints pt 5 lc rgb '#d62728' title 'theta 30 deg, eta 0.1 (rolling on): dissipates', "
+      << dq << " index 1 using 1:2 with linespoints pt 5 lc rgb '#d62728' title 'theta 30 deg, eta 0.1 (rolling on): dissipates; least-dissipating replica', "
       << dq << " index 2 using 1:2 with points pt 2 ps 2 lc rgb '#1f77b4' title 'frictionless: unstable', "
       << dq << " index 3 using 1:2 with points pt 3 ps 2 lc rgb '#d62728' title 'rolling on: unstable'\n";
     g << "reset\n" << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(cost_png.string()) << "\n"
@@ -247,6 +216,39 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
 }
 
 }  // namespace
+
+// One factor of one series over its replicas: failed if any replica failed; else the
+// worst replica's drift (what the recommendation judges), the mean and spread beside it.
+TimestepPoint timestep_point(bool friction, double factor, const std::vector<ResultRow>& rows) {
+  TimestepPoint p;
+  p.friction = friction;
+  p.dt_factor = factor;
+  p.replicas = static_cast<int>(rows.size());
+  p.ok = !rows.empty();
+  std::vector<double> drifts;
+  for (const ResultRow& r : rows) {
+    const double drift = r.task.status == "done" ? metric(r, "drift_per_simulated_s") : NAN;
+    if (!std::isfinite(drift)) {
+      p.ok = false;
+      if (p.error.empty()) p.error = r.task.error.empty() ? "drift not finite" : r.task.error;
+      continue;
+    }
+    drifts.push_back(drift);
+    p.dt = metric(r, "dt");
+    p.max_relative_error = std::max(p.max_relative_error, metric(r, "max_relative_error"));
+    p.cost += metric(r, "wall_s_per_simulated_s") / static_cast<double>(rows.size());
+  }
+  if (!p.ok || drifts.empty()) return p;
+  p.drift = drifts.front();
+  for (double d : drifts) {
+    p.drift_mean += d / static_cast<double>(drifts.size());
+    if (friction ? d > p.drift : std::abs(d) > std::abs(p.drift)) p.drift = d;
+  }
+  for (double d : drifts)
+    p.drift_sd += drifts.size() > 1 ? (d - p.drift_mean) * (d - p.drift_mean) / static_cast<double>(drifts.size() - 1) : 0.0;
+  p.drift_sd = std::sqrt(p.drift_sd);
+  return p;
+}
 
 const std::vector<std::string>& study_names() {
   static const std::vector<std::string> names = {"timestep", "grazing", "fidelity", "repose-fidelity"};

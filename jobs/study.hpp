@@ -19,6 +19,7 @@
 // one), replica spread, wall time; a chart of error against wall time (Pareto
 // front and failed tasks marked) and the cheapest setting within the tolerance.
 #include "db/store.hpp"
+#include "query.hpp"
 
 #include <cmath>
 #include <map>
@@ -74,6 +75,11 @@ struct TimestepStudy {
 
 // Runs (or reuses) the study's tasks in `store`; returns what it charted.
 TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& options);
+
+// One factor of one series from its replicas' results (metrics drift_per_simulated_s,
+// dt, max_relative_error, wall_s_per_simulated_s): failed if any replica failed or
+// drifted non-finitely, else the worst replica's drift with the mean and sd beside it.
+TimestepPoint timestep_point(bool friction, double factor, const std::vector<ResultRow>& rows);
 
 struct GrazingStudy {
   struct Row {

@@ -42,6 +42,27 @@ void test_abort_hook(std::size_t index) {
   if (env && *env && std::to_string(index) == env) std::abort();
 }
 
+// The snapshots' Xdmf description beside the HDF5 file: a viewing aid, so a failure
+// to write it is the task's warning (or part of its error), never the loss of a
+// finished task's results; without snapshots an earlier run's description goes.
+void add_xdmf(const std::string& h5_path, const std::vector<Snapshot>& snapshots, nlohmann::json& out) {
+  const std::string xmf = xdmf_path_for(h5_path);
+  std::error_code ec;
+  if (snapshots.empty()) {
+    std::filesystem::remove(xmf, ec);
+    return;
+  }
+  try {
+    write_snapshot_xdmf(xmf, std::filesystem::path(h5_path).filename().string(), snapshots);
+    out["artifacts"].push_back(nlohmann::json::array({"xdmf", xmf}));
+  } catch (const std::runtime_error& e) {
+    std::filesystem::remove(xmf, ec);  // no description of another run's snapshots
+    const char* key = out.value("status", "") == "done" ? "warnings" : "error";
+    const std::string before = out.value(key, "");
+    out[key] = before + (before.empty() ? "" : "; ") + e.what() + " (the HDF5 file and the results are kept)";
+  }
+}
+
 nlohmann::json run_scene(const WorkerTask& t) {
   nlohmann::json out;
   const SceneDef* scene = find_scene(t.scene);
@@ -72,11 +93,7 @@ nlohmann::json run_scene(const WorkerTask& t) {
   // The file says how the run ended: a failed run's series stop where it did.
   write_task_hdf5(t.h5_path, info, t.params, r.series, obs.snapshots);
   out["artifacts"] = nlohmann::json::array({nlohmann::json::array({"hdf5", t.h5_path})});
-  if (!obs.snapshots.empty()) {
-    const std::string xmf = xdmf_path_for(t.h5_path);
-    write_snapshot_xdmf(xmf, std::filesystem::path(t.h5_path).filename().string(), obs.snapshots);
-    out["artifacts"].push_back(nlohmann::json::array({"xdmf", xmf}));
-  }
+  add_xdmf(t.h5_path, obs.snapshots, out);
   return out;
 }
 

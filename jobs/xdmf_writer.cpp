@@ -66,6 +66,7 @@ std::string snapshot_xdmf(const std::string& h5_name, const std::vector<Snapshot
   for (std::size_t step = 0; step < snapshots.size(); ++step) {
     const Snapshot& s = snapshots[step];
     const std::size_t n = s.x.size();
+    if (n == 0) continue;  // an empty grid stops ParaView's reader for that time
     out << "      <Grid Name=\"" << xml_escaped(s.label.empty() ? "snapshot" : s.label) << "\" GridType=\"Uniform\">\n"
         << "        <Time Value=\"" << number(s.time) << "\"/>\n"
         << "        <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << n << "\" NodesPerElement=\"1\"/>\n"
@@ -91,7 +92,7 @@ void write_snapshot_xdmf(const std::string& path, const std::string& h5_name, co
     if (!f) {
       const std::string why = std::strerror(errno);
       std::remove(part.c_str());
-      throw std::runtime_error("cannot write the Xdmf file " + path + ": " + why);
+      throw std::runtime_error("cannot write the Xdmf file " + part + ": " + why);
     }
   }
   if (std::rename(part.c_str(), path.c_str()) != 0) {

@@ -7,6 +7,7 @@
 #include "../world.hpp"
 
 #include <algorithm>
+#include <set>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -231,7 +232,11 @@ Metrics ReposeResult::metrics() const {
                  {"final_height_m", final_height_m},
                  {"time_to_rest_s", time_to_rest_s},
                  {"reached_end_wall", reached_end_wall ? 1.0 : 0.0}};
-    if (!std::isfinite(repose_deg)) r.erase(r.begin(), r.begin() + 6);  // no fit: no angle
+    if (!std::isfinite(repose_deg)) {  // no fit: no angle, no error, no halves, no steepest
+      static const std::set<std::string> of_the_fit = {"repose_deg",       "repose_fit_err_deg", "steepest_deg",
+                                                       "fit_points",       "repose_upper_deg",   "repose_lower_deg"};
+      r.erase(std::remove_if(r.begin(), r.end(), [](const auto& kv) { return of_the_fit.count(kv.first) > 0; }), r.end());
+    }
     m.insert(m.begin(), r.begin(), r.end());
   }
   return m;

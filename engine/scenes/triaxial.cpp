@@ -250,6 +250,14 @@ double mobilised_sine(double axial, double lateral_a, double lateral_b) {
 }
 double sine_to_deg(double x) { return rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))); }
 
+// sin(psi) = -d eps_v / (2 d eps1 - d eps_v), compression positive. A contraction faster
+// than 2 d eps1 (a collapse) leaves the formula's domain: it is the most contractive
+// angle, -90 deg, not +90.
+double dilatancy_sine(double d_eps_v, double d_eps1) {
+  const double denom = 2.0 * d_eps1 - d_eps_v;
+  return denom > 0.0 ? -d_eps_v / denom : -1.0;
+}
+
 double kinetic_energy(const Particles& p) {
   double e = 0.0;
   for (std::size_t i = 0; i < p.size(); ++i) {
@@ -264,43 +272,6 @@ std::string fmt(double v, int prec = 4) {
   os.precision(prec);
   os << v;
   return os.str();
-}
-
-// Whether the critical-state window is at critical state: no volume change (the
-// dilatancy angle of the fitted eps_v slope) and no drift of phi_mob (a fitted change
-// across the window larger than its tolerance and than twice its own standard error,
-// which counts the rows' correlation). A window that fails keeps its phi_cv, with a
-// warning that says what moved and what would help: the number is not a critical-state
-// value, and maps and fits built on it inherit that.
-void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& e1, const std::vector<double>& ev,
-                          const std::vector<double>& phi, TriaxialResult& res) {
-  const std::string window = "eps1 " + fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to);
-  const std::string advice =
-      "; shear further (triaxial.axial_strain) or move the window (triaxial.cv_from, triaxial.cv_to)";
-  if (e1.size() >= 3) {
-    const double r = linear_trend(e1, ev).slope;  // compression positive: dilation r < 0
-    res.cv_dilatancy_deg = rad_to_deg(std::asin(std::clamp(-r / (2.0 - r), -1.0, 1.0)));
-    const Trend drift = linear_trend(e1, phi);
-    const double width = e1.back() - e1.front();
-    res.cv_drift_deg = drift.slope * width;
-    res.cv_drift_se_deg = drift.se * width;
-    if (std::abs(res.cv_dilatancy_deg) > cfg.cv_dilatancy_tolerance_deg)
-      res.outcome.warnings.push_back(
-          "not at critical state over " + window + ": the sample still " +
-          (res.cv_dilatancy_deg > 0 ? "dilates" : "contracts") + " (dilatancy angle " + fmt(res.cv_dilatancy_deg, 2) +
-          " deg over the window, |psi| <= " + fmt(cfg.cv_dilatancy_tolerance_deg, 2) +
-          " deg expected), so phi_cv carries dilatancy" + advice);
-    if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
-      res.outcome.warnings.push_back("not at critical state over " + window + ": phi_mob " +
-                                     (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
-                                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) +
-                                     " deg across the window" + advice);
-  }
-  if (res.cv_effective_samples < 4.0)
-    res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +
-                                   fmt(res.cv_effective_samples, 2) +
-                                   " independent samples of phi_mob: phi_cv_se_deg is itself uncertain; a wider "
-                                   "window or replicas pin phi_cv down");
 }
 
 // Servo all six walls to p0 until equilibrium (two consecutive passing checks).
@@ -373,6 +344,43 @@ StageReport stabilise(Rig& rig, const std::string& name) {
 }
 
 }  // namespace
+
+// Whether the critical-state window is at critical state: no volume change (the
+// dilatancy angle of the fitted eps_v slope) and no drift of phi_mob (a fitted change
+// across the window larger than its tolerance and than twice its own standard error,
+// which counts the rows' correlation). A window that fails keeps its phi_cv, with a
+// warning that says what moved and what would help: the number is not a critical-state
+// value, and maps and fits built on it inherit that.
+void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& e1, const std::vector<double>& ev,
+                          const std::vector<double>& phi, TriaxialResult& res) {
+  const std::string window = "eps1 " + fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to);
+  const std::string advice =
+      "; shear further (triaxial.axial_strain) or move the window (triaxial.cv_from, triaxial.cv_to)";
+  if (e1.size() >= 3) {
+    const double r = linear_trend(e1, ev).slope;  // compression positive: dilation r < 0
+    res.cv_dilatancy_deg = sine_to_deg(dilatancy_sine(r, 1.0));
+    const Trend drift = linear_trend(e1, phi);
+    const double width = e1.back() - e1.front();
+    res.cv_drift_deg = drift.slope * width;
+    res.cv_drift_se_deg = drift.se * width;
+    if (std::abs(res.cv_dilatancy_deg) > cfg.cv_dilatancy_tolerance_deg)
+      res.outcome.warnings.push_back(
+          "not at critical state over " + window + ": the sample still " +
+          (res.cv_dilatancy_deg > 0 ? "dilates" : "contracts") + " (dilatancy angle " + fmt(res.cv_dilatancy_deg, 2) +
+          " deg over the window, |psi| <= " + fmt(cfg.cv_dilatancy_tolerance_deg, 2) +
+          " deg expected), so phi_cv carries dilatancy" + advice);
+    if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
+      res.outcome.warnings.push_back("not at critical state over " + window + ": phi_mob " +
+                                     (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
+                                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) +
+                                     " deg across the window" + advice);
+  }
+  if (res.cv_effective_samples < 4.0)
+    res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +
+                                   fmt(res.cv_effective_samples, 2) +
+                                   " independent samples of phi_mob: phi_cv_se_deg is itself uncertain; a wider "
+                                   "window or replicas pin phi_cv down");
+}
 
 TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   cfg.validate();
@@ -636,11 +644,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       const double de1 = s.rows[j][c_e1] - s.rows[i][c_e1];
       if (de1 < cfg.dilatancy_window - 1e-9) continue;
       const double dev = s.rows[j][c_ev] - s.rows[i][c_ev];
-      // sin(psi) = -dev / (2 de1 - dev); a contraction faster than 2 de1 (a collapse)
-      // leaves the formula's domain: it is the most contractive angle, not +90.
-      const double denom = 2.0 * de1 - dev;
-      const double x = denom > 0.0 ? -dev / denom : -1.0;
-      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, sine_to_deg(x));
+      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, sine_to_deg(dilatancy_sine(dev, de1)));
       break;
     }
   }

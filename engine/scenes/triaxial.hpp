@@ -34,6 +34,7 @@
 #include "scene_status.hpp"
 
 #include <cstdint>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -134,9 +135,11 @@ struct TriaxialResult {
   // counts the rows' correlation (integrated autocorrelation time): the noise of this
   // run only, not the scatter between packings (replicas measure that).
   double phi_cv_deg = 0, phi_cv_se_deg = 0;
-  double cv_effective_samples = 0;  // window rows / (2 tau)
-  double cv_dilatancy_deg = 0;      // asin(-r / (2 - r)), r = d eps_v / d eps1 fitted over the window
-  double cv_drift_deg = 0, cv_drift_se_deg = 0;  // change of phi_mob across the window, fitted
+  // NaN when not measured (an empty window; fewer than 3 rows for the fits): a 0
+  // would read as a perfect critical state.
+  double cv_effective_samples = NAN;  // window rows / (2 tau)
+  double cv_dilatancy_deg = NAN;      // asin(-r / (2 - r)), r = d eps_v / d eps1 fitted over the window
+  double cv_drift_deg = NAN, cv_drift_se_deg = NAN;  // change of phi_mob across the window, fitted
   // The same two angles from the interior Love-Weber stress (contact forces only).
   // They differ from the walls' where body forces carry load: local damping left on
   // in shear opposes the systematic deformation and holds part of the axial load.
@@ -174,5 +177,13 @@ struct TriaxialResult {
 };
 
 TriaxialResult run_triaxial(const TriaxialConfig& config, Observer* observer = nullptr);
+
+// Whether the critical-state window's rows (eps1, eps_v, phi_mob in degrees) are at
+// critical state: sets res.cv_dilatancy_deg and res.cv_drift_deg / _se_deg (from 3
+// rows up) and adds a warning for a dilatancy angle beyond
+// cfg.cv_dilatancy_tolerance_deg, a drift beyond cfg.cv_drift_tolerance_deg and twice
+// its standard error, and res.cv_effective_samples below 4 (set it first).
+void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& eps1, const std::vector<double>& eps_v,
+                          const std::vector<double>& phi_deg, TriaxialResult& res);
 
 }  // namespace demcal::engine

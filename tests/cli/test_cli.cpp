@@ -270,6 +270,35 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
       (d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain[0].id, plain[0].key)).string())));
 }
 
+// The .xmf is a viewing aid: when it cannot be written the task still finishes with its
+// metrics and HDF5 file, and says why there is no .xmf.
+TEST(Cli, AnXdmfThatCannotBeWrittenIsAWarningNotALostTask) {
+  TempDir d;
+  json j = json::parse(collision_job("xw", {0.1}));
+  j["snapshots"] = true;
+  write(d.file("xw.json"), j.dump());
+  ASSERT_EQ(run_demcal({"run", "xw.json"}, d.path.string()).rc, 0);
+  const auto first = tasks_of(d.file("demcal.db"), "xw").at(0);
+  const fs::path h5 = d.path / "demcal-out" / "xw" / demcal::jobs::task_file_name(first.id, first.key);
+  const std::string xmf = demcal::jobs::xdmf_path_for(h5.string());
+  // The same task from scratch, with a folder where the .xmf is written first.
+  fs::remove(d.file("demcal.db"));
+  fs::remove_all(d.path / "demcal-out");
+  fs::create_directories(xmf + ".part");
+  const Result r = run_demcal({"run", "xw.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const auto again = tasks_of(d.file("demcal.db"), "xw").at(0);
+  EXPECT_EQ(again.status, "done");
+  EXPECT_NE(again.error.find("cannot write the Xdmf file " + xmf + ".part"), std::string::npos) << again.error;
+  EXPECT_TRUE(fs::exists(h5));
+  EXPECT_FALSE(fs::exists(xmf));
+  const Result q = run_demcal({"query", "--job", "xw", "--format", "json"}, d.path.string());
+  ASSERT_EQ(q.rc, 0) << q.err;
+  const json row = json::parse(q.out).at(0);
+  EXPECT_FALSE(row.at("metrics").empty());
+  EXPECT_FALSE(row.contains("xdmf"));
+}
+
 // ParaView's Xdmf reader opens the snapshots through the .xmf beside the task's file:
 // every dataset it names must exist in that file with the length it states, one grid
 // per snapshot at the snapshot's time, velocity and spin as 3-vectors.

@@ -327,3 +327,24 @@ TEST(ReposeScene, FrictionalSideWallsSteepenTheDeposit) {
     EXPECT_LT(p.x[i][1], walled.slab_depth_m) << "grain " << i << " left through the far wall";
   }
 }
+
+// A deposit at rest whose profile gave no fit reports the rest of its measurements
+// but nothing of the fit: no angle, error, halves or steepest angle that would read 0.
+TEST(ReposeResultMetrics, NoFitMeansNoAngleMetricsButTheRest) {
+  ReposeResult r;
+  r.repose_deg = NAN;
+  r.runout_ratio = 1.2;
+  const Metrics m = r.metrics();
+  auto has = [&](const std::string& k) {
+    return std::any_of(m.begin(), m.end(), [&](const auto& kv) { return kv.first == k; });
+  };
+  for (const char* k : {"repose_deg", "repose_fit_err_deg", "steepest_deg", "fit_points", "repose_upper_deg",
+                        "repose_lower_deg"})
+    EXPECT_FALSE(has(k)) << k;
+  EXPECT_TRUE(has("runout_ratio"));
+  EXPECT_TRUE(has("time_to_rest_s"));
+  r.repose_deg = 24.0;
+  const Metrics fitted = r.metrics();
+  for (const char* k : {"repose_deg", "repose_upper_deg", "repose_lower_deg", "steepest_deg"})
+    EXPECT_TRUE(std::any_of(fitted.begin(), fitted.end(), [&](const auto& kv) { return kv.first == k; })) << k;
+}

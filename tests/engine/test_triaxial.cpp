@@ -12,6 +12,8 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <random>
+#include <tuple>
 
 using namespace demcal::engine;
 
@@ -355,6 +357,66 @@ TEST(TriaxialScene, AWindowBeforeCriticalStateIsFlagged) {
   EXPECT_TRUE(warned) << r.outcome.message;
   EXPECT_GT(r.cv_effective_samples, 1.0);
   EXPECT_LE(r.cv_effective_samples, r.cv_samples);
+}
+
+// The judgement on synthetic windows, one rule at a time.
+TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
+  TriaxialConfig cfg;
+  cfg.cv_from = 0.20;
+  cfg.cv_to = 0.30;
+  auto window = [](double dev_de1, double phi0, double phi_change, double noise) {
+    std::vector<double> e1, ev, phi;
+    std::mt19937 rng(5);
+    std::normal_distribution<double> g(0.0, noise);
+    for (int i = 0; i <= 100; ++i) {
+      e1.push_back(0.20 + 0.001 * i);
+      ev.push_back(-0.1 + dev_de1 * (e1.back() - 0.20));
+      phi.push_back(phi0 + phi_change * i / 100.0 + (noise > 0 ? g(rng) : 0.0));
+    }
+    return std::make_tuple(e1, ev, phi);
+  };
+  auto judge = [&](double dev_de1, double phi_change, double noise, double n_eff) {
+    auto [e1, ev, phi] = window(dev_de1, 28.0, phi_change, noise);
+    TriaxialResult r;
+    r.cv_effective_samples = n_eff;
+    judge_critical_state(cfg, e1, ev, phi, r);
+    return r;
+  };
+  auto has = [](const TriaxialResult& r, const std::string& text) {
+    for (const auto& w : r.outcome.warnings)
+      if (w.find(text) != std::string::npos) return true;
+    return false;
+  };
+  const TriaxialResult steady = judge(0.0, 0.0, 0.5, 20.0);
+  EXPECT_TRUE(steady.outcome.warnings.empty()) << steady.outcome.warnings.front();
+  EXPECT_NEAR(steady.cv_dilatancy_deg, 0.0, 1e-9);
+  // Dilating at d eps_v / d eps1 = -0.3: psi = asin(0.3 / 2.3) = 7.5 deg.
+  const TriaxialResult dilating = judge(-0.3, 0.0, 0.0, 20.0);
+  EXPECT_NEAR(dilating.cv_dilatancy_deg, std::asin(0.3 / 2.3) * 180.0 / M_PI, 1e-9);
+  EXPECT_TRUE(has(dilating, "the sample still dilates"));
+  // Contracting past 2 d eps1 (a collapse): the most contractive angle, not +90.
+  const TriaxialResult collapsing = judge(3.0, 0.0, 0.0, 20.0);
+  EXPECT_NEAR(collapsing.cv_dilatancy_deg, -90.0, 1e-9);
+  EXPECT_TRUE(has(collapsing, "the sample still contracts"));
+  // phi_mob falling 4 deg across the window with little noise: a drift; the same fall
+  // in noise far larger than it is not told apart from none.
+  const TriaxialResult falling = judge(0.0, -4.0, 0.2, 20.0);
+  EXPECT_NEAR(falling.cv_drift_deg, -4.0, 0.3);
+  EXPECT_TRUE(has(falling, "phi_mob falls by"));
+  EXPECT_TRUE(has(judge(0.0, 3.0, 0.2, 20.0), "phi_mob rises by"));
+  const TriaxialResult noisy = judge(0.0, -4.0, 12.0, 20.0);
+  EXPECT_GT(2.0 * noisy.cv_drift_se_deg, std::abs(noisy.cv_drift_deg));
+  EXPECT_FALSE(has(noisy, "phi_mob"));
+  const TriaxialResult small_drift = judge(0.0, -1.5, 0.05, 20.0);  // significant but within 2 deg
+  EXPECT_FALSE(has(small_drift, "phi_mob"));
+  // Few independent samples.
+  EXPECT_TRUE(has(judge(0.0, 0.0, 0.5, 3.0), "independent samples"));
+  // Fewer than 3 rows: nothing fitted, and the metrics say so (NaN, not a perfect 0).
+  TriaxialResult two;
+  two.cv_effective_samples = 2.0;
+  judge_critical_state(cfg, {0.2, 0.3}, {0.0, 0.0}, {28.0, 28.0}, two);
+  EXPECT_TRUE(std::isnan(two.cv_dilatancy_deg));
+  EXPECT_TRUE(std::isnan(two.cv_drift_deg));
 }
 
 TEST(TriaxialScene, QuasiStaticWarningAboveTheInertialLimit) {

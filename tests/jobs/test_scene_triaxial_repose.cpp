@@ -378,6 +378,14 @@ TEST(TriaxialReposeScenes, QuickTriaxialTaskRunsThroughTheRunner) {
   expect_in(m, "max_dilatancy_deg", -90, 90);
   expect_in(m, "max_inertial_number", 0, 1);
   expect_in(m, "coordination_final", 1, 12);
+  expect_in(m, "coordination_interior_initial", 1, 12);
+  expect_in(m, "coordination_interior_final", 1, 12);
+  expect_in(m, "coordination_mech_interior_final", 1, 12);
+  // The walls deprive the whole-box count of contacts; the interior is better connected.
+  EXPECT_GT(m.at("coordination_interior_initial"), m.at("coordination_initial"));
+  expect_in(m, "cv_effective_samples", 0.5, 1000);
+  expect_in(m, "cv_dilatancy_deg", -90, 90);
+  expect_in(m, "cv_drift_se_deg", 0, 90);
   expect_in(m, "wall_s", 0, 600);
   EXPECT_DOUBLE_EQ(m.at("particles"), 400);
   EXPECT_NEAR(m.at("phi_diff_deg"), m.at("phi_peak_deg") - m.at("phi_cv_deg"), 1e-9);
