@@ -210,6 +210,14 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
   std::map<std::string, const ResponseSurface*> warned;
   for (const auto& rs : cal.surfaces)
     if (rs.warned > 0 && (!warned.count(rs.job) || rs.warned > warned[rs.job]->warned)) warned[rs.job] = &rs;
+  // Results whose phi_cv window was not at critical state enter a critical-state fit as
+  // if they were: say how many, per metric, apart from the general note.
+  for (const auto& rs : cal.surfaces)
+    if (rs.not_critical > 0)
+      cal.result.warnings.push_back(std::to_string(rs.not_critical) + " of the " + rs.metric + " results used from job " +
+                                    rs.job + " come from a window the run judged not at critical state (still "
+                                    "dilating or phi_mob drifting; demcal query --job " + rs.job +
+                                    " shows which): the surrogate takes them as critical-state values");
   for (const auto& [job, rs] : warned) {
     std::string w = rs->first_warning;
     if (w.size() > 160) w = w.substr(0, 157) + "...";

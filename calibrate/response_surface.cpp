@@ -146,6 +146,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
   rs.metric = metric;
   const MetricSpec spec = metric_spec(metric);
   rs.label = spec.label;
+  const bool uses_cv = spec.plus.rfind("phi_cv", 0) == 0 || spec.minus.rfind("phi_cv", 0) == 0;
 
   struct Row {
     jobs::ResultRow r;
@@ -243,6 +244,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
         p.values.push_back(*v);
         const std::string w = db::task_message(row.r.task).warning;
         if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
+        if (uses_cv && w.find("not at critical state") != std::string::npos) ++rs.not_critical;
       } else {
         ++p.missing;
       }

@@ -36,6 +36,9 @@ struct ResponseSurface {
   double pooled_sd = kNaN;           // replica standard deviation pooled over points with n >= 2
   int warned = 0;                    // finished tasks used that carry warnings (not quasi-static, ...)
   std::string first_warning;         // the first of them (db::task_message's warning)
+  // Of the results used, those whose phi_cv window the run judged not at critical
+  // state (still dilating, or phi_mob drifting): counted for metrics built on phi_cv.
+  int not_critical = 0;
 
   Box box() const;                   // the job grid's bounds
   Box data_box() const;              // the bounds of the points that have data

@@ -145,6 +145,24 @@ TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
   EXPECT_NE((r.out + r.err).find("3 of the 72 results used from job grid carry warnings"), std::string::npos)
       << r.out << r.err;
   EXPECT_NE((r.out + r.err).find("e.g.: not quasi-static: test"), std::string::npos) << r.out << r.err;
+  EXPECT_EQ((r.out + r.err).find("not at critical state"), std::string::npos) << r.out << r.err;
+  // Two results whose phi_cv window was judged not at critical state: the phi_cv
+  // surface says so by name, the phi_peak one does not.
+  {
+    db::Connection c(db, /*read_only=*/false);
+    c.exec("UPDATE tasks SET error = 'warning: not at critical state over eps1 0.2-0.3: the sample still dilates; "
+           "not quasi-static: test' WHERE id IN (4, 5)");
+    db::Store s(db, true);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_cv").not_critical, 2);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_peak").not_critical, 0);
+  }
+  r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("2 of the phi_cv results used from job grid come from a window the run judged not at "
+                                 "critical state"),
+            std::string::npos)
+      << r.out << r.err;
+  EXPECT_EQ((r.out + r.err).find("of the phi_peak results used"), std::string::npos) << r.out << r.err;
 }
 
 TEST(CalibrateCli, UnreachableTargetExitsNonZeroNamingTheBound) {
