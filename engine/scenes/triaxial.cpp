@@ -363,17 +363,17 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
     const double width = e1.back() - e1.front();
     res.cv_drift_deg = drift.slope * width;
     res.cv_drift_se_deg = drift.se * width;
+    std::vector<std::string> why;
     if (std::abs(res.cv_dilatancy_deg) > cfg.cv_dilatancy_tolerance_deg)
-      res.outcome.warnings.push_back(
-          "not at critical state over " + window + ": the sample still " +
-          (res.cv_dilatancy_deg > 0 ? "dilates" : "contracts") + " (dilatancy angle " + fmt(res.cv_dilatancy_deg, 2) +
-          " deg over the window, |psi| <= " + fmt(cfg.cv_dilatancy_tolerance_deg, 2) +
-          " deg expected), so phi_cv carries dilatancy" + advice);
+      why.push_back(std::string("the sample still ") + (res.cv_dilatancy_deg > 0 ? "dilates" : "contracts") +
+                    " (dilatancy angle " + fmt(res.cv_dilatancy_deg, 2) + " deg over the window, |psi| <= " +
+                    fmt(cfg.cv_dilatancy_tolerance_deg, 2) + " deg expected), so phi_cv carries dilatancy");
     if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
-      res.outcome.warnings.push_back("not at critical state over " + window + ": phi_mob " +
-                                     (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
-                                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) +
-                                     " deg across the window" + advice);
+      why.push_back(std::string("phi_mob ") + (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
+                    fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) + " deg across the window");
+    if (!why.empty())
+      res.outcome.warnings.push_back("not at critical state over " + window + ": " + why.front() +
+                                     (why.size() > 1 ? " and " + why.back() : std::string()) + advice);
   }
   if (res.cv_effective_samples < 4.0)
     res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +

@@ -409,6 +409,13 @@ TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
   EXPECT_FALSE(has(noisy, "phi_mob"));
   const TriaxialResult small_drift = judge(0.0, -1.5, 0.05, 20.0);  // significant but within 2 deg
   EXPECT_FALSE(has(small_drift, "phi_mob"));
+  // Both at once: one warning naming both, the advice once.
+  const TriaxialResult both = judge(-0.3, -4.0, 0.2, 20.0);
+  ASSERT_EQ(both.outcome.warnings.size(), 1u);
+  const std::string& w = both.outcome.warnings.front();
+  EXPECT_NE(w.find("still dilates"), std::string::npos) << w;
+  EXPECT_NE(w.find(" and phi_mob falls by"), std::string::npos) << w;
+  EXPECT_EQ(w.find("shear further"), w.rfind("shear further")) << w;
   // Few independent samples.
   EXPECT_TRUE(has(judge(0.0, 0.0, 0.5, 3.0), "independent samples"));
   // Fewer than 3 rows: nothing fitted, and the metrics say so (NaN, not a perfect 0).
