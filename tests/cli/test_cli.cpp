@@ -270,17 +270,22 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
       (d.path / "demcal-out" / "plain" / demcal::jobs::task_file_name(plain[0].id, plain[0].key)).string())));
 }
 
+// Runs a one-task collision job `name` with snapshots in d; its HDF5 and .xmf paths.
+std::pair<fs::path, std::string> run_with_snapshots(const TempDir& d, const std::string& name) {
+  json j = json::parse(collision_job(name, {0.1}));
+  j["snapshots"] = true;
+  write(d.file(name + ".json"), j.dump());
+  EXPECT_EQ(run_demcal({"run", name + ".json"}, d.path.string()).rc, 0);
+  const auto task = tasks_of(d.file("demcal.db"), name).at(0);
+  const fs::path h5 = d.path / "demcal-out" / name / demcal::jobs::task_file_name(task.id, task.key);
+  return {h5, demcal::jobs::xdmf_path_for(h5.string())};
+}
+
 // The .xmf is a viewing aid: when it cannot be written the task still finishes with its
 // metrics and HDF5 file, and says why there is no .xmf.
 TEST(Cli, AnXdmfThatCannotBeWrittenIsAWarningNotALostTask) {
   TempDir d;
-  json j = json::parse(collision_job("xw", {0.1}));
-  j["snapshots"] = true;
-  write(d.file("xw.json"), j.dump());
-  ASSERT_EQ(run_demcal({"run", "xw.json"}, d.path.string()).rc, 0);
-  const auto first = tasks_of(d.file("demcal.db"), "xw").at(0);
-  const fs::path h5 = d.path / "demcal-out" / "xw" / demcal::jobs::task_file_name(first.id, first.key);
-  const std::string xmf = demcal::jobs::xdmf_path_for(h5.string());
+  const auto [h5, xmf] = run_with_snapshots(d, "xw");
   // The same task from scratch, with a folder where the .xmf is written first.
   fs::remove(d.file("demcal.db"));
   fs::remove_all(d.path / "demcal-out");
@@ -304,13 +309,7 @@ TEST(Cli, AnXdmfThatCannotBeWrittenIsAWarningNotALostTask) {
 // per snapshot at the snapshot's time, velocity and spin as 3-vectors.
 TEST(Cli, SnapshotsAreDescribedForParaViewByAnXdmfFileThatMatchesTheHdf5) {
   TempDir d;
-  json j = json::parse(collision_job("xmf", {0.1}));
-  j["snapshots"] = true;
-  write(d.file("xmf.json"), j.dump());
-  ASSERT_EQ(run_demcal({"run", "xmf.json"}, d.path.string()).rc, 0);
-  const auto task = tasks_of(d.file("demcal.db"), "xmf").at(0);
-  const fs::path h5 = d.path / "demcal-out" / "xmf" / demcal::jobs::task_file_name(task.id, task.key);
-  const std::string xmf = demcal::jobs::xdmf_path_for(h5.string());
+  const auto [h5, xmf] = run_with_snapshots(d, "xmf");
   ASSERT_TRUE(fs::exists(xmf));
   const Result q = run_demcal({"query", "--job", "xmf", "--format", "json"}, d.path.string());
   ASSERT_EQ(q.rc, 0) << q.err;
