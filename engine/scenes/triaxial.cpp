@@ -354,8 +354,9 @@ StageReport stabilise(Rig& rig, const std::string& name) {
 void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& e1, const std::vector<double>& ev,
                           const std::vector<double>& phi, TriaxialResult& res) {
   const std::string window = "eps1 " + fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to);
+  // No "; " inside: a task's warnings are joined with it.
   const std::string advice =
-      "; shear further (triaxial.axial_strain) or move the window (triaxial.cv_from, triaxial.cv_to)";
+      " (shear further: triaxial.axial_strain, or move the window: triaxial.cv_from, triaxial.cv_to)";
   if (e1.size() >= 3) {
     const double r = linear_trend(e1, ev).slope;  // compression positive: dilation r < 0
     res.cv_dilatancy_deg = sine_to_deg(dilatancy_sine(r, 1.0));
@@ -378,8 +379,8 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
   if (res.cv_effective_samples < 4.0)
     res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +
                                    fmt(res.cv_effective_samples, 2) +
-                                   " independent samples of phi_mob: phi_cv_se_deg is itself uncertain; a wider "
-                                   "window or replicas pin phi_cv down");
+                                   " independent samples of phi_mob, so phi_cv_se_deg is itself uncertain (a wider "
+                                   "window or replicas pin phi_cv down)");
 }
 
 TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {

@@ -416,6 +416,7 @@ TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
   EXPECT_NE(w.find("still dilates"), std::string::npos) << w;
   EXPECT_NE(w.find(" and phi_mob falls by"), std::string::npos) << w;
   EXPECT_EQ(w.find("shear further"), w.rfind("shear further")) << w;
+  EXPECT_EQ(w.find("; "), std::string::npos) << "a task's warnings are joined with '; ': " << w;
   // Few independent samples.
   EXPECT_TRUE(has(judge(0.0, 0.0, 0.5, 3.0), "independent samples"));
   // Fewer than 3 rows: nothing fitted, and the metrics say so (NaN, not a perfect 0).
