@@ -83,12 +83,17 @@ fmt() { awk -v x="$1" 'BEGIN { if (x == "") printf "failed"; else printf "%.1f",
 diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else printf "%+.1f", a - b }'; }
 # table_row LABEL THETA ETA SEED_PEAK SEED_CV: one row of Table 2.2 or 2.3 from the
 # dense grid's first packing, beside the seed's values.
+# The last column is the window's dilatancy angle (cv_dilatancy_deg; "—" for results
+# stored before it existed), starred where the run judged the window not at critical
+# state (|psi| > 5 deg or phi_mob drifting).
 table_row() {
-  local row pk cv se
-  row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg |
+  local row pk cv se psi flag
+  row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
         awk -F'\t' -v t="$2" -v e="$3" '$1 == t && $2 == e && $3 == 1' | head -1)
-  pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row")
-  echo "| $1 | $4° | $(fmt "$pk")° | $(diff_of "$pk" "$4") | $5° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" "$5") |"
+  pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row"); psi=$(cut -f7 <<< "$row")
+  flag=""; [[ $(cut -f8 <<< "$row") == *"not at critical state"* ]] && flag=" *"
+  echo "| $1 | $4° | $(fmt "$pk")° | $(diff_of "$pk" "$4") | $5° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" "$5") |" \
+       "$(awk -v x="$psi" 'BEGIN { if (x == "") printf "—"; else printf "%.1f°", x }')$flag |"
 }
 
 # repose_table CSV: the Fig. 2.15 rows of one repose job beside the seed's values.
@@ -180,8 +185,8 @@ damped_means() {
   echo
   echo "## Table 2.2: dense, 100 kPa, η = 0.1, over θ"
   echo
-  echo "| θ | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ |"
-  echo "| --- | --- | --- | --- | --- | --- | --- |"
+  echo "| θ | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ | ψ in the φ_cv window (* not at critical state) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.7 38.6 40.4 41.4 41.5 42.6); seed_cv=(29.0 31.3 32.0 32.6 32.6 32.6)
   i=0
   for th in 15 20 25 30 35 40; do
@@ -191,8 +196,8 @@ damped_means() {
   echo
   echo "## Table 2.3: dense, 100 kPa, θ = 30°, over η"
   echo
-  echo "| η | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ |"
-  echo "| --- | --- | --- | --- | --- | --- | --- |"
+  echo "| η | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ | ψ in the φ_cv window (* not at critical state) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.0 41.4 45.5 47.2); seed_cv=(27.6 32.6 37.9 40.9)
   i=0
   for eta in 0 0.1 0.3 0.5; do
