@@ -105,6 +105,7 @@ Metrics TriaxialResult::metrics() const {
             {"walls_frictionless", walls_frictionless ? 1.0 : 0.0}};
   if (!outcome.ok()) return m;
   const Metrics mech{{"phi_peak_deg", phi_peak_deg},
+                     {"phi_peak_smoothed_deg", phi_peak_smoothed_deg},
                      {"eps1_at_peak", eps1_at_peak},
                      {"phi_cv_deg", phi_cv_deg},
                      {"phi_cv_se_deg", phi_cv_se_deg},
@@ -249,6 +250,22 @@ double mobilised_sine(double axial, double lateral_a, double lateral_b) {
   return (axial + s3) > 0.0 ? (axial - s3) / (axial + s3) : 0.0;
 }
 double sine_to_deg(double x) { return rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))); }
+
+// Largest centred running mean over `width` rows (odd) of the mobilised sine; NaN
+// when the series is shorter than the window.
+double peak_of_running_mean(const Series& s, std::size_t c_s1, std::size_t c_s2, std::size_t c_s3, std::size_t width) {
+  const std::size_t n = s.rows.size();
+  if (n < width) return NAN;
+  std::vector<double> x(n);
+  for (std::size_t i = 0; i < n; ++i) x[i] = mobilised_sine(s.rows[i][c_s1], s.rows[i][c_s2], s.rows[i][c_s3]);
+  double best = -1.0;
+  for (std::size_t i = 0; i + width <= n; ++i) {
+    double sum = 0.0;
+    for (std::size_t k = 0; k < width; ++k) sum += x[i + k];
+    best = std::max(best, sum / static_cast<double>(width));
+  }
+  return best;
+}
 
 // sin(psi) = -d eps_v / (2 d eps1 - d eps_v), compression positive. A contraction faster
 // than 2 d eps1 (a collapse) leaves the formula's domain: it is the most contractive
@@ -622,6 +639,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     res.max_inertial_number = std::max(res.max_inertial_number, r[c_in]);
   }
   res.phi_peak_deg = sine_to_deg(best);
+  res.phi_peak_smoothed_deg = sine_to_deg(peak_of_running_mean(s, c_s1, c_s2, c_s3, 5));
   res.phi_peak_interior_deg = sine_to_deg(best_in);
   res.cv_samples = static_cast<int>(cv.size());
   if (!cv.empty()) {

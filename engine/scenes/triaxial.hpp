@@ -131,6 +131,10 @@ struct TriaxialResult {
 
   // Metrics (meaningful only when outcome.ok())
   double phi_peak_deg = 0, eps1_at_peak = 0;
+  // The peak of the stress ratio's centred 5-row running mean (0.5% of strain at the
+  // default sampling): the maximum of noisy rows reads high by about the noise, the
+  // more so the smaller the sample; the difference says how much.
+  double phi_peak_smoothed_deg = NAN;
   // phi_cv: the angle of the mean stress ratio over the window; its standard error
   // counts the rows' correlation (integrated autocorrelation time): the noise of this
   // run only, not the scatter between packings (replicas measure that).
