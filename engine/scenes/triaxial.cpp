@@ -251,13 +251,10 @@ double mobilised_sine(double axial, double lateral_a, double lateral_b) {
 }
 double sine_to_deg(double x) { return rad_to_deg(std::asin(std::clamp(x, -1.0, 1.0))); }
 
-// Largest centred running mean over `width` rows (odd) of the mobilised sine; NaN
-// when the series is shorter than the window.
-double peak_of_running_mean(const Series& s, std::size_t c_s1, std::size_t c_s2, std::size_t c_s3, std::size_t width) {
-  const std::size_t n = s.rows.size();
+// Largest mean of `width` consecutive values; NaN when there are fewer.
+double peak_of_running_mean(const std::vector<double>& x, std::size_t width) {
+  const std::size_t n = x.size();
   if (n < width) return NAN;
-  std::vector<double> x(n);
-  for (std::size_t i = 0; i < n; ++i) x[i] = mobilised_sine(s.rows[i][c_s1], s.rows[i][c_s2], s.rows[i][c_s3]);
   double best = -1.0;
   for (std::size_t i = 0; i + width <= n; ++i) {
     double sum = 0.0;
@@ -619,9 +616,10 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
   // The walls' angles, and the same from the interior Love-Weber stress.
   double best = -1.0, best_in = -1.0, cv_in = 0.0;
-  std::vector<double> cv, cv_e1, cv_ev, cv_phi;
+  std::vector<double> sines, cv, cv_e1, cv_ev, cv_phi;
   for (const auto& r : s.rows) {
     const double x = mobilised_sine(r[c_s1], r[c_s2], r[c_s3]);
+    sines.push_back(x);
     const double x_in = mobilised_sine(r[c_zz], r[c_xx], r[c_yy]);
     if (x > best) {
       best = x;
@@ -639,7 +637,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     res.max_inertial_number = std::max(res.max_inertial_number, r[c_in]);
   }
   res.phi_peak_deg = sine_to_deg(best);
-  res.phi_peak_smoothed_deg = sine_to_deg(peak_of_running_mean(s, c_s1, c_s2, c_s3, 5));
+  res.phi_peak_smoothed_deg = sine_to_deg(peak_of_running_mean(sines, 5));
   res.phi_peak_interior_deg = sine_to_deg(best_in);
   res.cv_samples = static_cast<int>(cv.size());
   if (!cv.empty()) {
