@@ -93,13 +93,9 @@ Coordination coordination(const World& world, const Region& region) {
 
 double unbalanced_force_ratio(const World& world) {
   const Particles& p = world.particles();
-  double fsum = 0.0;
   long nm = 0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    if (p.fixed[i]) continue;
-    fsum += p.f[i].norm();
-    ++nm;
-  }
+  for (std::size_t i = 0; i < p.size(); ++i) nm += !p.fixed[i];
+  const double fsum = world.net_force_sum();
   double csum = 0.0;
   long nc = 0;
   world.for_each_contact([&](const ContactView& c) {

@@ -44,6 +44,7 @@ Coordination coordination(const World& world);
 Coordination coordination(const World& world, const Region& region);
 
 // Mean |net force| over mobile grains / mean |contact force|: 0 in static equilibrium.
+// The net force is taken before local damping (World::net_force_sum).
 double unbalanced_force_ratio(const World& world);
 
 // Sum of the volumes of mobile grains.

@@ -400,7 +400,7 @@ void World::smooth_wall_forces(std::size_t w, const int* first, const int* last,
 }
 
 // Gravity and (preparation only) local damping on the total force of grains [begin, end).
-void World::external_forces(int begin, int end) {
+void World::external_forces(int begin, int end, ThreadAcc& acc) {
   const Vec3 g = opt_.gravity;
   const double alpha = opt_.local_damping;
   Vec3* __restrict f = p_.f.data();
@@ -413,6 +413,10 @@ void World::external_forces(int begin, int end) {
     for (int i = begin; i < end; ++i)
       if (!fixed[i]) f[i] += m[i] * g;
   if (alpha == 0.0) return;
+  double net = 0.0;  // the imbalance the damping is about to hide (net_force_sum)
+  for (int i = begin; i < end; ++i)
+    if (!fixed[i]) net += f[i].norm();
+  acc.net_force_sum = net;
   // Cundall's local damping, -alpha |F| sign(v) per component, with sign(v) written
   // as copysign times (v != 0): the direction of motion is an unpredictable branch.
   // The loop runs over the components as one flat array so that it vectorises; it
@@ -430,6 +434,14 @@ void World::external_forces(int begin, int end) {
     fc[k] = damp(fc[k], vc[k]);
     tc[k] = damp(tc[k], wc[k]);
   }
+}
+
+double World::net_force_sum() const {
+  if (damped_) return net_force_sum_;
+  double sum = 0.0;
+  for (std::size_t i = 0; i < p_.size(); ++i)
+    if (!p_.fixed[i]) sum += p_.f[i].norm();
+  return sum;
 }
 
 void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_, opt_.threads), false); }
@@ -575,7 +587,7 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
       if (tid == 0) t_pairs += seconds_since(clock);
       wall_forces(lo, hi, acc_[blk], wall_part_.data() + static_cast<std::size_t>(blk) * nw);
       if (tid == 0) t_walls += seconds_since(clock);
-      external_forces(lo, hi);
+      external_forces(lo, hi, acc_[blk]);
       if (kick) half_kick(lo, hi, acc_[blk]);
     }
   }
@@ -593,9 +605,12 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   }
   max_overlap_ratio_ = 0.0;
   max_overlap_particle_ = -1;
+  damped_ = opt_.local_damping > 0.0;
+  net_force_sum_ = 0.0;
   bool finite = true;
-  for (const auto& a : acc_) {
+  for (const auto& a : acc_) {  // in block order: deterministic for a thread count
     finite = finite && a.finite;
+    net_force_sum_ += a.net_force_sum;
     if (a.max_overlap > max_overlap_ratio_) {
       max_overlap_ratio_ = a.max_overlap;
       max_overlap_particle_ = a.max_overlap_i;

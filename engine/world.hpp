@@ -28,6 +28,7 @@ struct alignas(64) ThreadAcc {
   double max_overlap = 0.0;  // largest overlap / radius seen by the thread
   long max_overlap_i = -1;
   bool finite = true;        // the thread's grains ended the step with finite x, v, w
+  double net_force_sum = 0.0;  // sum of |F| over the thread's free grains before local damping
 };
 // Where a thread's pair loop puts forces and torques: grains below `bound` (its own
 // block) in the grains' arrays, grains at or above it in the thread's buffers.
@@ -115,6 +116,11 @@ class World {
   double skin() const { return skin_; }
   double wall_work() const { return wall_work_; }  // work done on the grains by moving walls [J]
   double max_overlap_ratio() const { return max_overlap_ratio_; }  // of the last force evaluation
+  // Sum over free grains of |net force| (contacts and gravity) of the last force
+  // evaluation, taken before local damping: damping scales each component by
+  // 1 -+ alpha, which is not an imbalance of the grain. Measurements of equilibrium
+  // read this (as YADE's and PFC's unbalanced force do), not the damped force.
+  double net_force_sum() const;
   const PhaseTimes& phase_times() const { return times_; }
 
   // Calls f(const ContactView&) for every live contact, pairs then walls. Serial.
@@ -150,7 +156,7 @@ class World {
     wall_touch_[slot] = 0;
   }
   void smooth_wall_forces(std::size_t w, const int* first, const int* last, ThreadAcc& acc, WallPartial& sum);
-  void external_forces(int begin, int end);
+  void external_forces(int begin, int end, ThreadAcc& acc);
   void check_finite_and_overlap();
   void check_energy();
 
@@ -187,6 +193,8 @@ class World {
   double wall_work_ = 0.0;
   double max_overlap_ratio_ = 0.0;
   long max_overlap_particle_ = -1;
+  bool damped_ = false;           // local damping acted in the last force evaluation
+  double net_force_sum_ = 0.0;    // its sum of |F| before damping (when damped_)
 
   PhaseTimes times_;
 

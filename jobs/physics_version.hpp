@@ -4,6 +4,9 @@ namespace demcal::jobs {
 
 // Part of every task's content key. Bump when engine physics changes results, so
 // that work stored under the old physics is not reused as if it were current.
-constexpr int kPhysicsVersion = 1;
+//   1: the first.
+//   2: the unbalanced-force ratio reads the net force before local damping, so
+//      damped preparation stages (triaxial) end when the undamped imbalance passes.
+constexpr int kPhysicsVersion = 2;
 
 }  // namespace demcal::jobs

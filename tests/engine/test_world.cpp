@@ -167,6 +167,37 @@ TEST(Conservation, LocalDampingScalesAFallingGrainsAccelerationBy1MinusAlpha) {
   }
 }
 
+
+TEST(Measurements, UnbalancedForceRatioIgnoresLocalDamping) {
+  // Damping rescales each force component by 1 -+ alpha along the motion: it hides
+  // an imbalance, it does not remove one. The same crowded, moving, frictional box
+  // under gravity reads the same ratio with damping 0, 0.3 and 0.7 (on 1 and 2
+  // threads), while the forces the integrator uses differ.
+  const CrowdedBox box = crowded_box();
+  std::vector<Wall> walls = box_walls(Vec3::Zero(), box.dom.hi);
+  auto ratio = [&](double alpha, int threads, std::vector<Vec3>* forces) {
+    WorldOptions o = options(safe_dt(), threads);
+    o.gravity = Vec3(0.0, 0.0, -9.81);
+    o.local_damping = alpha;
+    World w(box.p, walls, box.dom, law(3e7, 2.7e7, 30.0, 1.0, 0.2), o);
+    w.refresh();
+    *forces = w.particles().f;
+    return unbalanced_force_ratio(w);
+  };
+  std::vector<Vec3> plain, damped;
+  const double ufr = ratio(0.0, 1, &plain);
+  EXPECT_GT(ufr, 0.05);  // far from equilibrium: the check has something to compare
+  double total = 0.0;
+  for (const Vec3& f : plain) total += f.norm();
+  for (double alpha : {0.3, 0.7})
+    for (int threads : {1, 2}) {
+      EXPECT_NEAR(ratio(alpha, threads, &damped), ufr, 1e-12 * ufr) << "alpha " << alpha << ", threads " << threads;
+      double moved = 0.0;  // how much damping changed the forces the integrator uses
+      for (std::size_t i = 0; i < plain.size(); ++i) moved += (damped[i] - plain[i]).norm();
+      EXPECT_GT(moved, 0.5 * alpha * total) << "alpha " << alpha;
+    }
+}
+
 TEST(Conservation, ContactAcrossThePeriodicSeamActsAsInTheMiddle) {
   // The same oblique, sliding, rolling pair twice: straddling the periodic seam in x,
   // and unwrapped in the middle of the box. The seam must change nothing: the same
