@@ -8,14 +8,10 @@
 namespace demcal::engine {
 namespace {
 
-struct Line {
-  double slope = 0, intercept = 0, slope_se = 0;
-  bool ok = false;
-};
-
-Line least_squares(const double* x, const double* h, int n) {
-  Line l;
-  if (n < 2) return l;
+// Least-squares slope of h over x (NaN when x does not vary): for the halves and
+// the steepest window, which need no error.
+double slope_of(const double* x, const double* h, int n) {
+  if (n < 2) return NAN;
   double mx = 0, mh = 0;
   for (int i = 0; i < n; ++i) {
     mx += x[i];
@@ -28,19 +24,7 @@ Line least_squares(const double* x, const double* h, int n) {
     sxx += (x[i] - mx) * (x[i] - mx);
     sxh += (x[i] - mx) * (h[i] - mh);
   }
-  if (!(sxx > 0.0)) return l;
-  l.slope = sxh / sxx;
-  l.intercept = mh - l.slope * mx;
-  if (n > 2) {
-    double ssr = 0;
-    for (int i = 0; i < n; ++i) {
-      const double e = h[i] - (l.intercept + l.slope * x[i]);
-      ssr += e * e;
-    }
-    l.slope_se = std::sqrt(ssr / (n - 2) / sxx);
-  }
-  l.ok = true;
-  return l;
+  return sxx > 0.0 ? sxh / sxx : NAN;
 }
 
 // The bins of [i_up, i_low] whose heights lie in [bottom, top].
@@ -60,8 +44,8 @@ double angle_between(const std::vector<double>& x, const std::vector<double>& h,
   // A line through a handful of bins of a rough profile is noise (the quick column's
   // halves of 4-5 bins read 9-31 deg around a 25 deg heap): no angle below 6.
   if (xs.size() < 6) return NAN;
-  const Line l = least_squares(xs.data(), hs.data(), static_cast<int>(xs.size()));
-  return l.ok ? rad_to_deg(std::atan(std::abs(l.slope))) : NAN;
+  const double slope = slope_of(xs.data(), hs.data(), static_cast<int>(xs.size()));
+  return std::isfinite(slope) ? rad_to_deg(std::atan(std::abs(slope))) : NAN;
 }
 
 }  // namespace
@@ -126,7 +110,9 @@ SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, d
     f.why = "fewer than 3 profile bins between the fit fractions";
     return f;
   }
-  const Line l = least_squares(xs.data(), hs.data(), f.points);
+  // Neighbouring bins share grains and the heap is not quite straight: residuals are
+  // correlated, and the regression's own error would count them as independent.
+  const Trend l = linear_trend(xs, hs);
   if (!l.ok) {
     f.why = "degenerate fit";
     return f;
@@ -134,9 +120,7 @@ SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, d
   f.ok = true;
   f.slope = l.slope;
   f.intercept = l.intercept;
-  // Neighbouring bins share grains and the heap is not quite straight: residuals are
-  // correlated, and the regression's own error would count them as independent.
-  f.slope_se = linear_trend(xs, hs).se;
+  f.slope_se = l.se;
   f.angle_deg = rad_to_deg(std::atan(std::abs(l.slope)));
   f.angle_err_deg = rad_to_deg(f.slope_se / (1.0 + l.slope * l.slope));
   const double mid = 0.5 * (top + bottom);
@@ -157,8 +141,8 @@ double steepest_angle_deg(const std::vector<double>& x, const std::vector<double
   window = std::max(2, window);
   double best = 0.0;
   for (int s = 0; s + window <= n; ++s) {
-    const Line l = least_squares(xs.data() + s, hs.data() + s, window);
-    if (l.ok) best = std::max(best, rad_to_deg(std::atan(std::abs(l.slope))));
+    const double slope = slope_of(xs.data() + s, hs.data() + s, window);
+    if (std::isfinite(slope)) best = std::max(best, rad_to_deg(std::atan(std::abs(slope))));
   }
   return best;
 }

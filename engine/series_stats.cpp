@@ -63,7 +63,9 @@ Trend linear_trend(const std::vector<double>& x, const std::vector<double>& y) {
     sxy += (x[i] - mx) * (y[i] - my);
   }
   if (sxx <= 0.0) return t;
+  t.ok = true;
   t.slope = sxy / sxx;
+  t.intercept = my - t.slope * mx;
   std::vector<double> resid(n);
   double rss = 0.0;
   for (std::size_t i = 0; i < n; ++i) {

@@ -24,8 +24,10 @@ struct MeanEstimate {
 MeanEstimate correlated_mean(const std::vector<double>& x);
 
 struct Trend {
-  double slope = 0;  // dy/dx, least squares
-  double se = 0;     // its standard error, widened by the residuals' correlation
+  bool ok = false;       // at least 3 points and x not all equal
+  double slope = 0;      // dy/dx, least squares
+  double intercept = 0;  // y at x = 0
+  double se = 0;         // the slope's standard error, widened by the residuals' correlation
 };
 Trend linear_trend(const std::vector<double>& x, const std::vector<double>& y);
 
