@@ -147,6 +147,14 @@ double steepest_angle_deg(const std::vector<double>& x, const std::vector<double
   return best;
 }
 
+SlopeFit fit_heap(const SurfaceProfile& prof, const Front& front, double f_lo, double f_hi) {
+  const std::size_t n = std::min(prof.x.size(), prof.h.size());
+  const std::size_t upto = front.bin >= 0 ? std::min(n, static_cast<std::size_t>(front.bin) + 1) : n;
+  const std::vector<double> x(prof.x.begin(), prof.x.begin() + static_cast<long>(upto));
+  const std::vector<double> h(prof.h.begin(), prof.h.begin() + static_cast<long>(upto));
+  return fit_slope(x, h, f_lo, f_hi);
+}
+
 Front deposit_front(const SurfaceProfile& prof, int start, double min_height, int max_gap_bins,
                     const std::vector<Vec3>* pos, const std::vector<double>* radius,
                     const std::vector<std::uint8_t>* include) {

@@ -71,6 +71,12 @@ Front deposit_front(const SurfaceProfile& prof, int start, double min_height, in
                     const std::vector<Vec3>* pos = nullptr, const std::vector<double>* radius = nullptr,
                     const std::vector<std::uint8_t>* include = nullptr);
 
+// fit_slope over the deposit up to its front (the whole profile when there is no
+// front). Grains beyond the front (at eta = 0 a sphere on the floor rolls on, and
+// one may bounce off the end wall in mid-air) are no part of the slope: one of them
+// as high as the crest's top fraction made the fit start past the deposit and fail.
+SlopeFit fit_heap(const SurfaceProfile& prof, const Front& front, double f_lo, double f_hi);
+
 // How concentrated the motion is: the fewest of the included grains whose kinetic
 // energy (0.5 m v^2) makes up `share` of the total, and the fastest of them. A
 // deposit that will not come to rest because a handful of grains rattle is told

@@ -195,6 +195,8 @@ void ReposeConfig::validate() const {
   }
   if (column_width < 2.0 * material.d_max)
     throw ConfigError("repose.column_width", "must hold at least two of the largest grains");
+  if (column_height < 2.0 * material.d_max)
+    throw ConfigError("repose.column_height", "must hold at least two of the largest grains");
 }
 
 Metrics ReposeResult::metrics() const {
@@ -228,6 +230,7 @@ Metrics ReposeResult::metrics() const {
                  {"repose_lower_deg", repose_lower_deg},
                  {"runout_m", runout_m},
                  {"runout_ratio", runout_ratio},
+                 {"grains_beyond_front", static_cast<double>(grains_beyond_front)},
                  {"front_m", front_m},
                  {"final_height_m", final_height_m},
                  {"time_to_rest_s", time_to_rest_s},
@@ -541,8 +544,10 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       res.outcome.message = os.str();
     } else {
       res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
-      const SlopeFit fit = fit_slope(prof.x, prof.h, cfg.fit_lo, cfg.fit_hi);
       const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
+      const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
+      for (std::size_t i = 0; i < p.size(); ++i)
+        if (mobile[i] && p.x[i][0] - p.r[i] > front.x) ++res.grains_beyond_front;
       res.final_height_m = fit.h_max;
       res.front_m = front.x;
       res.runout_m = front.x - W;

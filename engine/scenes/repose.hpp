@@ -116,6 +116,7 @@ struct ReposeResult {
   double fit_slope = 0, fit_intercept = 0, fit_x_upper = 0, fit_x_lower = 0;  // line h = intercept + slope x
   double runout_m = 0;        // front - gate position
   double runout_ratio = 0;    // (L_inf - L0) / L0
+  long grains_beyond_front = 0;  // mobile grains past the deposit's front (left out of the fit)
   double front_m = 0;         // L_inf: front position from the back wall
   double final_height_m = 0;  // deposit height above the floor level
   double time_to_rest_s = 0;  // after the gate opened

@@ -183,6 +183,29 @@ TEST(ReposeProfile, FrontIgnoresDetachedBouncers) {
   EXPECT_NEAR(g.x, 0.0705, 1e-9);
 }
 
+TEST(ReposeProfile, AGrainInFlightBeyondTheFrontDoesNotDerailTheFit) {
+  // The seed study's eta = 0 slab: a straight 20 deg heap, and far beyond its front a
+  // grain in mid-air as high as 88% of the crest (it rolled on and bounced off the end
+  // wall). The fit over the whole profile started at that grain and found no slope.
+  std::vector<Vec3> pos;
+  std::vector<double> rad;
+  const double r = 0.0005, slope = std::tan(20.0 * kPi / 180.0), h0 = 0.03;
+  for (double x = r; h0 - slope * x > r; x += 2 * r)
+    for (double z = r; z <= h0 - slope * x; z += 2 * r) {
+      pos.push_back(Vec3(x, 0.0, z));
+      rad.push_back(r);
+    }
+  pos.push_back(Vec3(0.2, 0.0, 0.88 * h0));
+  rad.push_back(r);
+  const SurfaceProfile prof = surface_profile(pos, rad, nullptr, 0.0, 0.25, 2 * r, 0.0);
+  const Front front = deposit_front(prof, 0, r, 3, &pos, &rad);
+  EXPECT_LT(front.x, 0.1);
+  EXPECT_FALSE(fit_slope(prof.x, prof.h, 0.2, 0.8).ok);  // what the scene did
+  const SlopeFit f = fit_heap(prof, front, 0.2, 0.8);
+  ASSERT_TRUE(f.ok) << f.why;
+  EXPECT_NEAR(f.angle_deg, 20.0, 1.0);
+}
+
 TEST(ReposeProfile, MotionCarriersTellAFewRattlersFromAFlow) {
   // 200 grains creeping at 1 mm/s and 3 rattlers at 10 cm/s: the rattlers carry 98%.
   std::vector<Vec3> v(203, Vec3(1e-3, 0.0, 0.0));
