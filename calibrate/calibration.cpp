@@ -113,7 +113,7 @@ std::string gaps_under(const ResponseSurface& rs, const FitResult& fit) {
 }  // namespace
 
 std::string job_for_metric(db::Store& store, const std::string& metric, const std::vector<std::string>& jobs_in,
-                           const std::vector<jobs::Where>& where) {
+                           const std::vector<jobs::Where>& where, const std::string& metric_flag) {
   (void)where;
   for (const auto& j : jobs_in)
     if (!store.find_job(j)) {
@@ -129,9 +129,9 @@ std::string job_for_metric(db::Store& store, const std::string& metric, const st
     if (job_has_metric(store, j, spec)) have.push_back(j);
   if (have.empty()) {
     if (!is_alias(metric))
-      throw JobError("--target", "unknown metric \"" + metric + "\" (expected " + join(metric_aliases()) +
+      throw JobError(metric_flag, "unknown metric \"" + metric + "\" (expected " + join(metric_aliases()) +
                                      ", or a metric some job stores); jobs searched: " + join(pool));
-    throw JobError("--target", "no data: no job stores " + spec.plus + " for " + metric + " (jobs searched: " + join(pool) + ")");
+    throw JobError(metric_flag, "no data: no job stores " + spec.plus + " for " + metric + " (jobs searched: " + join(pool) + ")");
   }
   if (have.size() > 1)
     throw JobError("--job", metric + " is stored by several jobs (" + join(have) + "); name the one to use with --job");
@@ -229,7 +229,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
   return cal;
 }
 
-std::int64_t store_fit(db::Store& store, const FitRequest& req, const Calibration& cal, int round, const nlohmann::json& extra) {
+FitRecord fit_record(const FitRequest& req, const Calibration& cal, int round, const nlohmann::json& extra) {
   nlohmann::json targets = nlohmann::json::array();
   for (const auto& t : req.targets)
     targets.push_back({{"metric", t.metric}, {"value", t.value},
@@ -251,7 +251,12 @@ std::int64_t store_fit(db::Store& store, const FitRequest& req, const Calibratio
   for (const auto& w : req.where) where[w.key] = w.value;
   r["where"] = where;
   for (const auto& [k, v] : extra.items()) r[k] = v;
-  return store.add_fit(targets.dump(), cal.result.method + "; surrogate chosen by leave-one-out", r.dump());
+  return {targets, cal.result.method + "; surrogate chosen by leave-one-out", r};
+}
+
+std::int64_t store_fit(db::Store& store, const FitRequest& req, const Calibration& cal, int round, const nlohmann::json& extra) {
+  const FitRecord rec = fit_record(req, cal, round, extra);
+  return store.add_fit(rec.targets.dump(), rec.method, rec.result.dump());
 }
 
 std::vector<RefinePoint> refine_points(const ResponseSurface& rs, double theta, double eta, int round) {

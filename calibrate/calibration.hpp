@@ -28,12 +28,22 @@ struct Calibration {
 };
 
 // The job holding `metric` among `jobs` (every base job when empty). Throws
-// JobError naming --target (no job has it) or --job (several have it).
+// JobError naming `metric_flag` (no job has it) or --job (several have it).
 std::string job_for_metric(db::Store& store, const std::string& metric, const std::vector<std::string>& jobs,
-                           const std::vector<jobs::Where>& where);
+                           const std::vector<jobs::Where>& where, const std::string& metric_flag = "--target");
 
 // Throws JobError for bad input (unknown metric, no data, grids that do not overlap).
 Calibration calibrate(db::Store& store, const FitRequest& request);
+
+// What a stored fit holds: the targets, the method and the result (with the jobs,
+// surrogates, round and pinned parameters).
+struct FitRecord {
+  nlohmann::json targets;
+  std::string method;
+  nlohmann::json result;
+};
+FitRecord fit_record(const FitRequest& request, const Calibration& cal, int round,
+                     const nlohmann::json& extra = nlohmann::json::object());
 
 // Stores the fit (round 0: the plain fit) and returns its id.
 std::int64_t store_fit(db::Store& store, const FitRequest& request, const Calibration& cal, int round,

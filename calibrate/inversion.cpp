@@ -39,7 +39,8 @@ bool parse_number(const std::string& s, double& out) {
 std::pair<std::string, std::string> split_pair(const std::string& text, const std::string& field, const char* what) {
   const auto eq = text.find('=');
   if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
-    throw JobError(field, std::string("expected METRIC=") + what + " (e.g. phi_peak=41.4), got \"" + text + "\"");
+    throw JobError(field, std::string("expected METRIC=") + what + " (e.g. phi_peak=" +
+                              (std::string(what) == "SIGMA" ? "1.0" : "41.4") + "), got \"" + text + "\"");
   const std::string name = text.substr(0, eq);
   static const std::regex ok("[A-Za-z_][A-Za-z0-9_.]*");
   if (!std::regex_match(name, ok)) throw JobError(field, "\"" + name + "\" is not a metric name (in \"" + text + "\")");
@@ -95,6 +96,13 @@ Target parse_target(const std::string& text, const std::string& field) {
   Target t;
   t.metric = name;
   if (!parse_number(value, t.value)) throw JobError(field, "value of " + name + " is not a finite number: \"" + value + "\"");
+  // An angle no sample can show is a typo, not a target out of the grid's reach.
+  static const char* const angles[] = {"phi_peak", "phi_cv", "repose", "phi_peak_deg", "phi_cv_deg", "repose_deg"};
+  const bool angle = std::find(std::begin(angles), std::end(angles), name) != std::end(angles);
+  if (angle && !(t.value >= 0.0 && t.value < 90.0))
+    throw JobError(field, name + " is an angle in degrees: must lie in [0, 90), got " + value);
+  if ((name == "phi_diff" || name == "phi_diff_deg") && !(std::abs(t.value) < 90.0))
+    throw JobError(field, name + " is a difference of angles in degrees: must lie in (-90, 90), got " + value);
   return t;
 }
 

@@ -195,11 +195,12 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     if (kept.empty()) c << "NaN NaN\n";
   }
 
+  jobs::ImageFile image(r.out);
   std::ofstream g(path("map.gp"));
   char title[400];
   std::snprintf(title, sizeof title, "%s, job %s: %d points with data, %d holes; %s", rs.label.c_str(), rs.job.c_str(),
                 rs.with_data(), rs.holes(), s.describe().c_str());
-  g << terminal_line(ext) << "set output " << quoted(r.out) << "\n"
+  g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
     << "set title " << quoted(r.title.empty() ? title : r.title) << " noenhanced font ',10'\n"
     << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel " << quoted(rs.label) << " noenhanced\n"
     << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
@@ -227,7 +228,7 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   g << "\n";
   g.close();
   run_gnuplot(path("map.gp"));
-  if (!fs::exists(r.out) || fs::file_size(r.out) == 0) throw std::runtime_error("gnuplot wrote nothing to " + r.out);
+  image.commit();
 }
 
 std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job) {

@@ -141,6 +141,10 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     throw JobError("--job", "no job named \"" + job + "\"" +
                                 (all.empty() ? " (the database holds no jobs)" : " (jobs: " + join(all) + ")"));
   }
+  for (const auto& w : opt.where)
+    if (w.key == "theta_deg" || w.key == "eta")
+      throw JobError("--where", w.key + " is an axis of the surface (theta_deg and eta are what a map draws and a fit "
+                                "finds); --where pins the other parameters");
   ResponseSurface rs;
   rs.job = job;
   rs.metric = metric;

@@ -28,7 +28,7 @@ std::string sigma_note(const calibrate::TargetFit& t) {
 
 void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_t fit_id) {
   const auto& r = cal.result;
-  out << "fit " << fit_id << " (" << r.method << ")\n";
+  out << "fit " << (fit_id < 0 ? std::string("(not stored)") : std::to_string(fit_id)) << " (" << r.method << ")\n";
   out << "box: theta " << g(r.box.theta_lo) << " .. " << g(r.box.theta_hi) << " deg, eta " << g(r.box.eta_lo) << " .. "
       << g(r.box.eta_hi) << "\n";
   out << "surrogates:\n";
@@ -97,9 +97,14 @@ void add_fit(CLI::App& app, int& exit_code) {
       const std::string out_dir = a->out.empty() ? default_out_dir(a->db) : a->out;
       if (a->refine > 0) require_writable_dir(a->out.empty() ? "--db" : "--out", out_dir);
       { db::Store probe(a->db, /*read_only=*/true); }
-      db::Store store(a->db);
+      // A database demcal may not write still answers: the fit is printed, not stored.
+      const std::string refusal = db::write_refusal(a->db);
+      if (!refusal.empty() && a->refine > 0)
+        throw jobs::JobError("--refine", "stores its runs in " + a->db + ", which cannot be written: " + refusal);
+      db::Store store(a->db, /*read_only=*/!refusal.empty());
       calibrate::Calibration cal = calibrate::calibrate(store, req);
-      std::int64_t id = calibrate::store_fit(store, req, cal, 0);
+      std::int64_t id = refusal.empty() ? calibrate::store_fit(store, req, cal, 0) : -1;
+      if (id < 0) std::cerr << "demcal: warning: the fit is not stored: " << a->db << " cannot be written (" << refusal << ")\n";
       std::vector<calibrate::RefineRound> rounds;
       if (a->refine > 0 && cal.result.ok) {
         calibrate::RefineOptions ro;
@@ -110,9 +115,9 @@ void add_fit(CLI::App& app, int& exit_code) {
         if (!rounds.empty()) id = rounds.back().fit_id;
       }
       if (a->format == "json") {
-        auto row = store.fits().back();
-        nlohmann::json j = nlohmann::json::parse(row.result_json);
-        j["fit_id"] = id;
+        nlohmann::json j = id < 0 ? calibrate::fit_record(req, cal, 0).result
+                                  : nlohmann::json::parse(store.fits().back().result_json);
+        j["fit_id"] = id < 0 ? nlohmann::json(nullptr) : nlohmann::json(id);
         std::cout << j.dump(2) << "\n";
       } else {
         print_fit(std::cout, cal, id);

@@ -38,7 +38,7 @@ void add_map(CLI::App& app, int& exit_code) {
       require_db(a->db);
       db::Store store(a->db, /*read_only=*/true);
       const std::vector<std::string> jobs = a->job.empty() ? std::vector<std::string>{} : std::vector<std::string>{a->job};
-      const std::string job = calibrate::job_for_metric(store, a->metric, jobs, where);
+      const std::string job = calibrate::job_for_metric(store, a->metric, jobs, where, "--metric");
       calibrate::GatherOptions go;
       go.where = where;
       const calibrate::ResponseSurface rs = calibrate::gather(store, job, a->metric, go);

@@ -1,5 +1,6 @@
 #include "common.hpp"
 
+#include "db/schema.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/shard.hpp"
@@ -109,7 +110,12 @@ int slurm(SlurmArgs a) {
   // The script runs in the database's folder and writes the parts beside it: both
   // must exist when it runs, and a #SBATCH line cannot carry a path with blanks.
   require_writable_file("--db", a.db);
+  // The merge at the end must be able to take the shards: a file that is not a
+  // demcal database (or is corrupt, or newer) is refused now, not after every shard ran.
+  db::check_file(a.db);
   const fs::path parts = parts_folder(a);
+  if (fs::exists(parts) && !fs::is_directory(parts))
+    throw jobs::JobError(a.parts.empty() ? "--db" : "--parts", parts.string() + " exists and is not a folder (the shards' databases go there)");
   if (parts.string().find_first_of(" \t") != std::string::npos)
     throw jobs::JobError(a.parts.empty() ? "--db" : "--parts",
                          "the parts folder " + parts.string() +

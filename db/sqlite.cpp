@@ -2,6 +2,8 @@
 
 #include <sqlite3.h>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <filesystem>
 
@@ -13,19 +15,46 @@ namespace {
 }
 }  // namespace
 
+// A file: URI for `path` (absolute; '%', '?' and '#' escaped) with a query string.
+static std::string uri_of(const std::string& path, const char* query) {
+  std::string u = "file:";
+  for (char c : std::filesystem::absolute(path).string()) {
+    if (c == '%') u += "%25";
+    else if (c == '?') u += "%3f";
+    else if (c == '#') u += "%23";
+    else u += c;
+  }
+  return u + "?" + query;
+}
+
+// Why demcal may not write `path` (empty when it may): the file, or the folder that
+// must take SQLite's -wal and -shm files beside it.
+std::string write_refusal(const std::string& path) {
+  const auto dir = std::filesystem::absolute(path).parent_path();
+  if (std::filesystem::exists(path) && ::access(path.c_str(), W_OK) != 0) return "the file is read-only";
+  if (std::filesystem::is_directory(dir) && ::access(dir.c_str(), W_OK) != 0)
+    return "its folder " + dir.string() + " is not writable (SQLite keeps its journal beside the file)";
+  return "";
+}
+
 Connection::Connection(const std::string& path, bool read_only) : path_(path) {
   bool open = false;
   if (read_only) {
     // Readers open the file read-write (never creating it) with writes refused
     // (query_only): a connection opened SQLITE_OPEN_READONLY leaves the WAL's -wal and
     // -shm files behind when it closes, since it may not checkpoint and remove them.
-    // Where the file or its folder is not writable, a true read-only open it is.
-    open = sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr) == SQLITE_OK &&
+    // SQLite opens a file it may not write read-only without a word: that case, and
+    // a folder that cannot take the -shm file, take the read-only paths below.
+    open = write_refusal(path).empty() &&
+           sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr) == SQLITE_OK &&
            sqlite3_exec(db_, "PRAGMA query_only = ON", nullptr, nullptr, nullptr) == SQLITE_OK;
     if (!open) {
       sqlite3_close(db_);
       db_ = nullptr;
     }
+    if (!open && std::filesystem::is_regular_file(path)) open = open_read_only(path);
+  } else if (const std::string why = write_refusal(path); !why.empty()) {
+    throw DbError("cannot write database " + path + ": " + why, true);
   }
   if (!open) {
     const int flags = read_only ? SQLITE_OPEN_READONLY : (SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
@@ -45,6 +74,23 @@ Connection::Connection(const std::string& path, bool read_only) : path_(path) {
   // Two runners share one file: wait for the other's write lock instead of failing.
   sqlite3_busy_timeout(db_, 30000);
   sqlite3_extended_result_codes(db_, 0);
+}
+
+// A database demcal may read but not write. A WAL database needs its -shm file, which
+// SQLite creates beside it: where the folder refuses that, the file is read as
+// immutable (no locks, no WAL: what the last checkpoint left, which is everything
+// once its writer has closed; a writer alive in a folder nobody may write is not
+// possible). Returns false when neither works (the caller reports SQLite's error).
+bool Connection::open_read_only(const std::string& path) {
+  for (const char* query : {"mode=ro", "immutable=1"}) {
+    const int flags = SQLITE_OPEN_READONLY | SQLITE_OPEN_URI | SQLITE_OPEN_NOMUTEX;
+    if (sqlite3_open_v2(uri_of(path, query).c_str(), &db_, flags, nullptr) == SQLITE_OK &&
+        sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr) == SQLITE_OK)
+      return true;
+    sqlite3_close(db_);
+    db_ = nullptr;
+  }
+  return false;
 }
 
 Connection::~Connection() { sqlite3_close(db_); }

@@ -24,6 +24,10 @@ class DbError : public std::runtime_error {
 
 class Statement;
 
+// Why demcal may not write the database at `path` (the file, or its folder, which
+// must take SQLite's -wal and -shm files); empty when it may.
+std::string write_refusal(const std::string& path);
+
 class Connection {
  public:
   Connection(const std::string& path, bool read_only);
@@ -39,6 +43,7 @@ class Connection {
   const std::string& path() const { return path_; }
 
  private:
+  bool open_read_only(const std::string& path);
   sqlite3* db_ = nullptr;
   std::string path_;
 };

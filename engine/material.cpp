@@ -17,11 +17,13 @@ void non_negative(double v, const char* field) {
 
 void Material::validate() const {
   positive(kn, "material.kn");
-  non_negative(ks, "material.ks");
+  // Ks = 0 or b = 0 would switch friction or rolling resistance off whatever theta
+  // and eta say, and every result would still read as theirs.
+  positive(ks, "material.ks");
   positive(density, "material.density");
   if (!std::isfinite(friction_angle) || friction_angle < 0.0 || friction_angle >= kPi / 2)
     throw ConfigError("material.friction_angle", "must lie in [0, 90) degrees");
-  non_negative(rolling_b, "material.b");
+  positive(rolling_b, "material.b");
   non_negative(rolling_eta, "material.eta");
   positive(d_min, "material.diameter.min");
   positive(d_max, "material.diameter.max");

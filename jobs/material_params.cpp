@@ -6,9 +6,9 @@ std::vector<ParamSpec> material_params() {
   const engine::Material d;  // the engine's defaults are the job file's defaults
   return {
       real_param("material", "kn", "kn", d.kn).above(0),
-      real_param("material", "ks", "ks", d.ks).at_least(0),
+      real_param("material", "ks", "ks", d.ks).above(0),
       real_param("material", "density", "density", d.density).above(0),
-      real_param("material", "b", "b", d.rolling_b).at_least(0),
+      real_param("material", "b", "b", d.rolling_b).above(0),
       real_param("material", "theta_deg", "theta_deg", 0.0).at_least(0).below(90),
       real_param("material", "eta", "eta", d.rolling_eta).at_least(0),
       real_param("material", "diameter.min", "d_min", d.d_min).above(0).at_most(1.0),

@@ -243,13 +243,18 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
       throw JobError("--where", "status is one of pending, running, done, failed; got \"" + w.value + "\"");
     return;
   }
+  double d = 0.0;
+  if (w.key == "task") {
+    if (!parse_number(w.value, d) || d != std::floor(d) || d < 1)
+      throw JobError("--where", "task is a task id (a whole number >= 1, as query prints); got \"" + w.value + "\"");
+    return;
+  }
   bool numeric = false;
   for (const auto& r : all) {
     if (!r.params.contains(w.key)) continue;
     if (!r.params[w.key].is_number()) return;
     numeric = true;
   }
-  double d = 0.0;
   if (numeric && !parse_number(w.value, d))
     throw JobError("--where", w.key + " is a number in every task; got \"" + w.value + "\"");
 }

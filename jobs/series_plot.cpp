@@ -57,6 +57,29 @@ std::string gnuplot_png_terminal(int width, int height) {
          " } else { set terminal png size " + size + " }\n";
 }
 
+ImageFile::ImageFile(std::string out) : out_(std::move(out)) {
+  const std::filesystem::path o(out_);
+  // Same folder (rename stays atomic), same extension (gnuplot's svg terminal does
+  // not care, but a reader of a stray file does).
+  part_ = (o.parent_path() / ("." + o.filename().string() + ".part" + std::to_string(::getpid()) +
+                              o.extension().string())).string();
+}
+
+ImageFile::~ImageFile() {
+  if (done_) return;
+  std::error_code ec;
+  std::filesystem::remove(part_, ec);
+}
+
+void ImageFile::commit() {
+  std::error_code ec;
+  if (!std::filesystem::exists(part_) || std::filesystem::file_size(part_, ec) == 0 || ec)
+    throw std::runtime_error("gnuplot wrote nothing for " + out_);
+  std::filesystem::rename(part_, out_, ec);
+  if (ec) throw std::runtime_error("cannot put the image in place at " + out_ + ": " + ec.message());
+  done_ = true;
+}
+
 void plot_series(const PlotRequest& r) {
   const std::string ext = extension_of(r.out);
   if (ext != ".png" && ext != ".svg") throw JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
@@ -88,6 +111,7 @@ void plot_series(const PlotRequest& r) {
   for (const auto& y : r.y) yi.push_back(col_index(y, "--y"));
   if (yi.empty()) throw JobError("--y", "give at least one column");
 
+  ImageFile image(r.out);
   const auto tmp = std::filesystem::temp_directory_path() / ("demcal-plot-" + std::to_string(getpid()));
   std::filesystem::create_directories(tmp);
   const std::string data = (tmp / "data.txt").string(), script = (tmp / "plot.gp").string();
@@ -111,7 +135,7 @@ void plot_series(const PlotRequest& r) {
       axis += (axis.empty() ? "" : ", ") + label(r.y[i], yi[i]);
     }
     std::ofstream g(script);
-    g << terminal_line(ext) << "set output " << quoted(r.out) << "\n"
+    g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
       << "set title " << quoted(r.title.empty() ? r.series : r.title) << " noenhanced\n"
       << "set xlabel " << quoted(label(r.x, xi)) << " noenhanced\nset ylabel " << quoted(y1)
       << " noenhanced\nset key noenhanced\nset grid\n";
@@ -129,6 +153,7 @@ void plot_series(const PlotRequest& r) {
     throw;
   }
   std::filesystem::remove_all(tmp);
+  image.commit();
 }
 
 }  // namespace demcal::jobs

@@ -25,4 +25,23 @@ std::string gnuplot_quoted(const std::string& text);
 // The PNG terminal line series plots use (pngcairo when available), at width x height.
 std::string gnuplot_png_terminal(int width, int height);
 
+// An image gnuplot draws for `out`: it writes to part() (a hidden file beside
+// `out`), and commit() renames that over `out` once gnuplot has finished. A run that
+// fails or is killed leaves an earlier image at `out` whole, and the destructor
+// removes an uncommitted part.
+class ImageFile {
+ public:
+  explicit ImageFile(std::string out);
+  ~ImageFile();
+  ImageFile(const ImageFile&) = delete;
+  ImageFile& operator=(const ImageFile&) = delete;
+  const std::string& part() const { return part_; }
+  // Throws std::runtime_error when gnuplot left nothing at part().
+  void commit();
+
+ private:
+  std::string out_, part_;
+  bool done_ = false;
+};
+
 }  // namespace demcal::jobs

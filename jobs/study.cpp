@@ -164,9 +164,10 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
   const std::string dq = gnuplot_quoted(data.string());
   const fs::path drift_png = dir / "timestep_drift.png", cost_png = dir / "timestep_cost.png";
   const fs::path script = dir / "timestep.gp";
+  ImageFile drift_image(drift_png.string()), cost_image(cost_png.string());
   {
     std::ofstream g(script);
-    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(drift_png.string()) << "\n"
+    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(drift_image.part()) << "\n"
       << "set title 'Collision test (seed Fig. 2.6): energy drift against the time-step factor' noenhanced\n"
       << "set xlabel 'dt factor k  (dt = k sqrt(m_min / Kn))' noenhanced\n"
       << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
@@ -198,7 +199,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
       << dq << " index 1 using 1:2 with linespoints pt 5 lc rgb '#d62728' title 'theta 30 deg, eta 0.1 (rolling on): dissipates; least-dissipating replica', "
       << dq << " index 2 using 1:2 with points pt 2 ps 2 lc rgb '#1f77b4' title 'frictionless: unstable', "
       << dq << " index 3 using 1:2 with points pt 3 ps 2 lc rgb '#d62728' title 'rolling on: unstable'\n";
-    g << "reset\n" << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(cost_png.string()) << "\n"
+    g << "reset\n" << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(cost_image.part()) << "\n"
       << "set title 'Collision test: accuracy against cost (stable runs; Pareto front joined)' noenhanced\n"
       << "set xlabel 'wall seconds per simulated second (one core, contended machine)' noenhanced\n"
       << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
@@ -211,6 +212,8 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
       << dq << " index 1 using 3:2 with points pt 5 lc rgb '#d62728' title 'rolling on (drift = dissipation, not error)'\n";
   }
   run_gnuplot_script(script.string());
+  drift_image.commit();
+  cost_image.commit();
   s.files.push_back(drift_png.string());
   s.files.push_back(cost_png.string());
 }
@@ -350,6 +353,7 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
   const fs::path dir = o.out_dir;
   const fs::path csv = dir / "grazing.csv", data = dir / "grazing.dat", script = dir / "grazing.gp",
                  png = dir / "grazing_energy.png";
+  ImageFile image(png.string());
   {
     std::ofstream c(csv);
     c.precision(10);
@@ -369,7 +373,7 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
       }
     std::ofstream g(script);
     const std::string dq = gnuplot_quoted(data.string());
-    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(png.string()) << "\n"
+    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
       << "set title 'Grazing impact, theta 30 deg, eta 0.1, b 1, no damping: energy after / before' noenhanced\n"
       << "set xlabel 'incidence angle from the contact normal [deg] (90 = grazing)' noenhanced\n"
       << "set ylabel 'E_after / E_before (kinetic + rotational + elastic)' noenhanced\n"
@@ -393,6 +397,7 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
     g << "\n";
   }
   run_gnuplot_script(script.string());
+  image.commit();
   s.files = {csv.string(), png.string()};
   return s;
 }
@@ -666,9 +671,10 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   }
   const std::string dq = gnuplot_quoted(data.string());
   const int label_col = 2 + 2 * static_cast<int>(s.metrics.size());
+  ImageFile image(png.string());
   {
     std::ofstream g(script);
-    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(png.string()) << "\n"
+    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
       << "set title " << gnuplot_quoted("demcal study " + s.name + ": " + k.what + " against wall time (" +
                                         std::to_string(s.replicas) + " replicas per setting)") << " noenhanced\n"
       << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
@@ -710,6 +716,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
       << ", " << dq << " index 2 using 1:2:3 with labels offset 0,-1.3 font ',9' tc rgb '#b00000' notitle\n";
   }
   run_gnuplot_script(script.string());
+  image.commit();
   k.chart = png.string();
 }
 

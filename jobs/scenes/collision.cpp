@@ -91,13 +91,22 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
+// The scene is frictionless unless keep_friction: theta and eta given then change the
+// task's key and nothing it computes.
+std::string advice(const nlohmann::json& p) {
+  if (p.at("keep_friction").get<bool>()) return "";
+  if (p.at("theta_deg").get<double>() == 0.0 && p.at("eta").get<double>() == 0.0) return "";
+  return "material.theta_deg and material.eta are not used: the collision scene runs frictionless unless "
+         "collision.keep_friction is true";
+}
+
 }  // namespace
 
 SceneDef scene_collision() {
   return SceneDef{kSection, collision_params(), resolve, run,
                   /*headline=*/{"dt_over_critical", "drift_per_million_steps", "max_relative_error", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
-                  /*advice=*/nullptr};
+                  /*advice=*/advice};
 }
 
 }  // namespace demcal::jobs

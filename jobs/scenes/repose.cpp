@@ -136,8 +136,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   check_diameters(p);
   if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>()))
     throw JobError("repose.fit_hi", "must exceed repose.fit_lo (" + num(p["fit_lo"]) + "), got " + num(p["fit_hi"]));
-  if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>())
+  if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>()) {
+    // Blame the one the user moved: a min_collapse_time left at its default is not theirs.
+    if (p["min_collapse_time"].get<double>() == engine::ReposeConfig{}.min_collapse_time)
+      throw JobError("repose.time_limit", "must exceed repose.min_collapse_time (" + num(p["min_collapse_time"]) +
+                                              " s, its default), got " + num(p["time_limit"]));
     throw JobError("repose.min_collapse_time", "must be below repose.time_limit (" + num(p["time_limit"]) + ")");
+  }
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {

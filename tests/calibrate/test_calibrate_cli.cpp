@@ -294,6 +294,62 @@ TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
   EXPECT_NE(r.err.find("has 1 theta_deg and"), std::string::npos) << r.err;
 }
 
+TEST(CalibrateCli, ImpossibleTargetsAndPinnedAxesAreRefusedAndNothingIsStored) {
+  TempDir d;
+  const std::string dir = d.path.string();
+  make_db(d);
+  for (const char* t : {"phi_peak=-5", "phi_cv=95", "repose=90"}) {
+    const auto r = run_demcal({"fit", "--target", t, "--target", "phi_diff=8"}, dir);
+    EXPECT_EQ(r.rc, 2) << t;
+    EXPECT_NE(r.err.find("is an angle in degrees: must lie in [0, 90)"), std::string::npos) << r.err;
+  }
+  auto r = run_demcal({"fit", "--target", "phi_peak=40", "--target", "phi_diff=95"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("phi_diff is a difference of angles"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--where", "theta_deg=20"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--where: theta_deg is an axis of the surface"), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "phi_peak", "--where", "eta=0.1"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--where: eta is an axis"), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "phi_pk"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--metric: unknown metric \"phi_pk\""), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=40", "--sigma", "phi_peak"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("(e.g. phi_peak=1.0)"), std::string::npos) << r.err;
+  db::Store s(d.file("demcal.db"), /*read_only=*/true);
+  EXPECT_TRUE(s.fits().empty());
+}
+
+TEST(CalibrateCli, AFailedGnuplotLeavesTheEarlierMapWhole) {
+  // A gnuplot that dies while drawing (killed, disk full) must not leave a broken
+  // image where the user's good one was: the map is drawn beside it, then renamed.
+  TempDir d;
+  const std::string dir = d.path.string();
+  make_db(d, false);
+  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string good = slurp(d.file("m.png"));
+  ASSERT_GT(good.size(), 1000u);
+  // The stand-in runs the real gnuplot for scripts that draw nothing (the contour
+  // tables) and, for the image, starts the file and fails.
+  fs::create_directories(d.path / "bin");
+  const std::string fake = (d.path / "bin" / "gnuplot").string();
+  write(fake, "#!/bin/sh\n"
+              "out=$(sed -n \"s/^set output '\\(.*\\)'$/\\1/p\" \"$1\")\n"
+              "if [ -z \"$out\" ]; then PATH=" + std::string(std::getenv("PATH")) + " exec gnuplot \"$@\"; fi\n"
+              "printf 'PNG' > \"$out\"\nexit 1\n");
+  fs::permissions(fake, fs::perms::owner_all);
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
+                 {{"PATH", (d.path / "bin").string() + ":" + std::getenv("PATH")}});
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("gnuplot failed"), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(d.file("m.png")), good);
+  for (const auto& e : fs::directory_iterator(d.path))
+    EXPECT_EQ(e.path().filename().string().find(".part"), std::string::npos) << e.path();
+}
+
 TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   TempDir d;
   {

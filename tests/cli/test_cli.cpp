@@ -112,6 +112,9 @@ TEST(Cli, RunQueryStatusAndResume) {
   r = run_demcal({"query", "--where", "dt_factor=abc"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("dt_factor is a number"), std::string::npos) << r.err;
+  r = run_demcal({"query", "--where", "task=abc"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("task is a task id"), std::string::npos) << r.err;
   r = run_demcal({"query", "--where", "dt_factor=0.3"}, d.path.string());
   EXPECT_EQ(r.rc, 0);
   EXPECT_NE(r.err.find("no task matches"), std::string::npos) << r.err;

@@ -258,6 +258,22 @@ TEST(Distribute, HelpForMergeAndSlurm) {
   EXPECT_EQ(run_demcal({"merge", "--into", "x.db"}, d.path.string()).rc, 2);  // no parts
 }
 
+TEST(Distribute, SlurmRefusesADestinationItCouldNotMergeInto) {
+  // Found out after every shard has run, a bad destination would waste the allocation.
+  TempDir d;
+  write(d.file("j.json"), collision_job("sl", {0.1, 0.2}));
+  write(d.file("text.db"), "not a database at all, but long enough to look like a file header..........");
+  Result r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "text.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("text.db"), std::string::npos) << r.err;
+  fs::create_directories(d.path / "sub");
+  write(d.file("sub/parts"), "a file where the parts folder would go");
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "sub/x.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("is not a folder"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("demcal-sl.slurm.sh")));
+}
+
 namespace demcal::test {
 namespace {
 

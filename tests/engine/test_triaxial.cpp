@@ -314,12 +314,12 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   // The smoothed peak: the largest mean of 5 consecutive rows' sines, never above the raw peak.
   double best5 = -1.0;
   for (std::size_t i = 0; i + 5 <= r.series.rows.size(); ++i) {
-    double sum = 0.0;
+    double run = 0.0;
     for (std::size_t k = i; k < i + 5; ++k) {
       const double s1 = col(r, k, "sigma1"), s3 = 0.5 * (col(r, k, "sigma2") + col(r, k, "sigma3"));
-      sum += (s1 - s3) / (s1 + s3);
+      run += (s1 - s3) / (s1 + s3);
     }
-    best5 = std::max(best5, sum / 5.0);
+    best5 = std::max(best5, run / 5.0);
   }
   EXPECT_NEAR(r.phi_peak_smoothed_deg, std::asin(best5) * deg, 1e-10);
   EXPECT_LE(r.phi_peak_smoothed_deg, r.phi_peak_deg);

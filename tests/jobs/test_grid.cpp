@@ -63,6 +63,7 @@ TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
   json j = base();
   j["material"]["theta_deg"] = 5;
   j["grid"] = {{"theta_deg", {30}}};
+  j["collision"]["keep_friction"] = true;  // else theta is unused, and a second note says so
   const Job job = parse(j);
   ASSERT_EQ(job.tasks.size(), 1u);
   EXPECT_TRUE(job.tasks[0].params["theta_deg"].is_number_float());
@@ -74,6 +75,7 @@ TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
   // 30 and 30.0 are the same work: the same key.
   json k = base();
   k["material"]["theta_deg"] = 30.0;
+  k["collision"]["keep_friction"] = true;
   EXPECT_EQ(parse(k).tasks[0].key, job.tasks[0].key);
 }
 

@@ -232,6 +232,8 @@ const std::vector<Bad>& bad_cases() {
       {"repose_side_walls_unknown", true, [](json& j) { j["repose"]["side_walls"] = "rough"; }, "repose.side_walls"},
       {"repose_side_walls_too_close", true, [](json& j) { j["repose"]["side_walls"] = "frictional"; j["repose"]["depth_diameters"] = 1.0; }, "repose.depth_diameters"},
       {"repose_column_too_narrow", true, [](json& j) { j["repose"]["column_width"] = 0.003; }, "repose.column_width"},
+      {"repose_column_too_short", true, [](json& j) { j["repose"]["column_height"] = 0.0001; }, "repose.column_height"},
+      {"repose_time_limit_below_default_min_collapse", true, [](json& j) { j["repose"]["time_limit"] = 0.001; }, "repose.time_limit"},
       {"repose_stiffness_scale_above_one", true, [](json& j) { j["repose"]["stiffness_scale"] = 2; }, "repose.stiffness_scale"},
       {"repose_fit_window_inverted", true, [](json& j) { j["repose"]["fit_lo"] = 0.8; j["repose"]["fit_hi"] = 0.5; }, "repose.fit_hi"},
       {"repose_time_limit_negative", true, [](json& j) { j["repose"]["time_limit"] = -1; }, "repose.time_limit"},

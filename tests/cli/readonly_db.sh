@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# A database demcal may read but not write (a colleague's results, a read-only share):
+# status and query still answer, run refuses with the reason and exit 2, and nothing
+# is left beside the file. Permissions do not bind root, so the commands run as the
+# unprivileged user `nobody`; skipped (77) where that cannot be arranged.
+#   readonly_db.sh DEMCAL
+set -u
+DEMCAL=$1
+if [[ $(id -u) != 0 ]] || ! command -v runuser > /dev/null || ! id nobody > /dev/null 2>&1; then
+  echo "skipped: needs root, runuser and the user nobody to test permissions"
+  exit 77
+fi
+T=$(mktemp -d /tmp/demcal-readonly.XXXXXX)
+trap 'chmod -R u+w "$T"; rm -rf "$T"' EXIT
+chmod 755 "$T"
+cp "$DEMCAL" "$T/demcal"  # the build folder may not be open to nobody
+cat > "$T/j.json" << 'JOB'
+{"name": "ro", "scene": "collision", "material": {"kn": 3e7, "diameter": {"min": 0.001, "max": 0.002}},
+ "collision": {"particles": 20, "steps": 200, "sample_every": 20}, "grid": {"dt_factor": [0.1, 0.2]},
+ "seed": 1, "threads": 1}
+JOB
+mkdir "$T/shut" "$T/open" "$T/outs"
+chmod 777 "$T/outs"  # where the refused runs would have put their HDF5 files
+"$T/demcal" run "$T/j.json" --db "$T/shut/x.db" --out "$T/out" > /dev/null 2>&1 || { echo "setup run failed"; exit 1; }
+cp "$T/shut/x.db" "$T/open/x.db"
+chmod 444 "$T/shut/x.db" "$T/open/x.db"
+chmod 555 "$T/shut"   # a folder nobody may write: SQLite cannot make its -shm file there
+chmod 777 "$T/open"   # a writable folder, a read-only file
+sum=$(md5sum < "$T/shut/x.db")
+fail=0
+as_nobody() { runuser -u nobody -- "$T/demcal" "$@"; }
+expect() {  # expect RC PATTERN -- ARGS...: exit code RC and PATTERN in stdout+stderr
+  local rc=$1 pat=$2; shift 3
+  local out got
+  out=$(cd "$T" && as_nobody "$@" 2>&1); got=$?
+  if [[ $got != "$rc" || "$out" != *"$pat"* ]]; then
+    echo "FAIL: demcal $* gave exit $got (expected $rc) without '$pat':"; echo "$out"; fail=1
+  fi
+}
+for dir in shut open; do
+  expect 0 "ro" -- status --db "$T/$dir/x.db"
+  expect 0 "dt_factor" -- query --db "$T/$dir/x.db"
+  expect 2 "cannot write database" -- run "$T/j.json" --db "$T/$dir/x.db" --out "$T/outs/$dir"
+done
+expect 2 "the file is read-only" -- run "$T/j.json" --db "$T/open/x.db" --out "$T/outs/open"
+expect 2 "is not writable" -- run "$T/j.json" --db "$T/shut/new.db" --out "$T/outs/new"
+[[ $(md5sum < "$T/shut/x.db") == "$sum" ]] || { echo "FAIL: the read-only database changed"; fail=1; }
+left=$(ls "$T/shut")
+[[ "$left" == "x.db" ]] || { echo "FAIL: files left in the read-only folder: $left"; fail=1; }
+[[ -z "$(ls "$T/outs")" ]] || { echo "FAIL: a refused run made its output folder"; fail=1; }
+exit $fail
