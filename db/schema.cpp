@@ -92,7 +92,8 @@ void check_header(const std::string& path) {
 void check_file(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
-    throw DbError(path + " is a folder, not a database file (pass --db FOLDER/demcal.db)", true);
+    throw DbError(path + " is a folder, not a database file (give a file in it, e.g. " +
+                  (std::filesystem::path(path) / "demcal.db").string() + ")", true);
   if (file_is_empty_or_missing(path)) return;
   check_header(path);
   Connection c(path, /*read_only=*/true);

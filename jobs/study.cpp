@@ -746,8 +746,34 @@ std::vector<std::string> fidelity_knob_names(const std::string& name) {
   return out;
 }
 
+// The jobs of each selected knob, parsed (validated). A grid path such as
+// grid.dt_factor[3] is the study's, not the user's: an error names the knob, and
+// --reference when the user chose that value.
+std::vector<std::vector<Job>> knob_job_sets(const FidelityDef& d, const std::vector<KnobDef>& knobs,
+                                            const StudyOptions& o, const std::string& name, int replicas) {
+  std::vector<std::vector<Job>> jobs;
+  for (const auto& k : knobs) {
+    std::vector<Job> kj;
+    for (const auto& j : knob_jobs(d, k, o.quick, replicas)) {
+      try {
+        kj.push_back(parse_job(j.dump(2), "study " + name));
+      } catch (const JobError& e) {
+        const bool given = std::any_of(o.reference.begin(), o.reference.end(), [&](const auto& r) {
+          return find_knob(d, r.first) == find_knob(d, k.name);
+        });
+        throw JobError(given ? "--reference" : "study " + name,
+                       k.name + (given ? " = " + label_of(k.reference) : std::string()) + ": " + e.reason() +
+                           " (in the study's job: " + e.path() + ")");
+      }
+    }
+    jobs.push_back(std::move(kj));
+  }
+  return jobs;
+}
+
 void check_fidelity_options(const std::string& name, const StudyOptions& o) {
-  selected_knobs(fidelity_def(name, o.quick), o);
+  const FidelityDef d = fidelity_def(name, o.quick);
+  knob_job_sets(d, selected_knobs(d, o), o, name, effective_replicas(o));
 }
 
 FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, const StudyOptions& o) {
@@ -764,12 +790,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   }
 
   // Every job is validated before any runs: an invalid one writes nothing.
-  std::vector<std::vector<Job>> jobs;
-  for (const auto& k : knobs) {
-    std::vector<Job> kj;
-    for (const auto& j : knob_jobs(d, k, o.quick, s.replicas)) kj.push_back(parse_job(j.dump(2), "study " + name));
-    jobs.push_back(std::move(kj));
-  }
+  const std::vector<std::vector<Job>> jobs = knob_job_sets(d, knobs, o, name, s.replicas);
   const fs::path dir = o.out_dir;
   fs::create_directories(dir / "jobs");
   std::set<std::string> keys;

@@ -81,19 +81,31 @@ col() {
 }
 fmt() { awk -v x="$1" 'BEGIN { if (x == "") printf "failed"; else printf "%.1f", x }'; }
 diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else printf "%+.1f", a - b }'; }
-# table_row LABEL THETA ETA SEED_PEAK SEED_CV: one row of Table 2.2 or 2.3 from the
-# dense grid's first packing, beside the seed's values.
-# The last column is the window's dilatancy angle (cv_dilatancy_deg; "—" for results
-# stored before it existed), starred where the run judged the window not at critical
-# state (|psi| > 5 deg or phi_mob drifting).
+# table_row CSV LABEL THETA ETA SEED_PEAK SEED_CV: one row of Table 2.2 or 2.3 from
+# the table job's packings (seeds 1..replicas), beside the seed's values: the mean
+# over the packings that finished, ± their standard deviation (one packing: φ_cv's
+# own standard error), and how many there were. 500 grains scatter by more than a
+# degree in φ_peak between packings, so one packing cannot tell a 2° miss.
+# The last column is the windows' mean dilatancy angle (cv_dilatancy_deg), with a
+# star per packing the run judged not at critical state (|psi| > 5 deg or phi_mob
+# drifting).
 table_row() {
-  local row pk cv se psi flag
-  row=$(col "$tmp/seed-dense-grid.csv" theta_deg eta seed phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
-        awk -F'\t' -v t="$2" -v e="$3" '$1 == t && $2 == e && $3 == 1' | head -1)
-  pk=$(cut -f4 <<< "$row"); cv=$(cut -f5 <<< "$row"); se=$(cut -f6 <<< "$row"); psi=$(cut -f7 <<< "$row")
-  flag=""; [[ $(cut -f8 <<< "$row") == *"not at critical state"* ]] && flag=" *"
-  echo "| $1 | $4° | $(fmt "$pk")° | $(diff_of "$pk" "$4") | $5° | $(fmt "$cv") ± $(fmt "$se")° | $(diff_of "$cv" "$5") |" \
-       "$(awk -v x="$psi" 'BEGIN { if (x == "") printf "—"; else printf "%.1f°", x }')$flag |"
+  local stats
+  stats=$(col "$1" theta_deg eta phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
+          awk -F'\t' -v t="$3" -v e="$4" -v sp="$5" -v sc="$6" '
+    $1 == t && $2 == e && $3 != "" {
+      n++; pk += $3; pk2 += $3 * $3; cv += $4; cv2 += $4 * $4; se = $5; psi += $6
+      if (index($7, "not at critical state")) star = star "*"
+    }
+    function sd(s, s2) { return n > 1 ? sqrt((s2 - s * s / n) / (n - 1)) : 0 }
+    END {
+      if (n == 0) { printf "| %s | — | failed | — | %s° | failed | — | — |\n", sp, sc; exit }
+      mp = pk / n; mc = cv / n
+      printf "| %s° | %.1f ± %.1f° | %+.1f | %s° | %.1f ± %.1f° | %+.1f | %.1f°%s%s | %d |\n",
+             sp, mp, sd(pk, pk2), mp - sp, sc, mc, n > 1 ? sd(cv, cv2) : se, mc - sc, psi / n,
+             star == "" ? "" : " ", star, n
+    }')
+  echo "| $2 $stats"
 }
 
 # repose_table CSV: the Fig. 2.15 rows of one repose job beside the seed's values.
@@ -141,7 +153,7 @@ GP
 
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-for j in seed-dense-grid seed-replicas seed-dense-loose seed-repose seed-repose-walled \
+for j in seed-dense-grid seed-table-2-2 seed-table-2-3 seed-replicas seed-dense-loose seed-repose seed-repose-walled \
          seed-damping-in-shear seed-damping-in-shear-theta; do query $j > "$tmp/$j.csv" || true; done
 has_rows() { [[ -s "$1" ]] && [[ $(wc -l < "$1") -gt 1 ]]; }
 
@@ -185,23 +197,23 @@ damped_means() {
   echo
   echo "## Table 2.2: dense, 100 kPa, η = 0.1, over θ"
   echo
-  echo "| θ | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ | ψ in the φ_cv window (* not at critical state) |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
+  echo "| θ | seed φ_peak | demcal φ_peak (± sd) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.7 38.6 40.4 41.4 41.5 42.6); seed_cv=(29.0 31.3 32.0 32.6 32.6 32.6)
   i=0
   for th in 15 20 25 30 35 40; do
-    table_row "$th°" $th 0.1 ${seed_pk[$i]} ${seed_cv[$i]}
+    table_row "$tmp/seed-table-2-2.csv" "$th°" $th 0.1 ${seed_pk[$i]} ${seed_cv[$i]}
     i=$((i + 1))
   done
   echo
   echo "## Table 2.3: dense, 100 kPa, θ = 30°, over η"
   echo
-  echo "| η | seed φ_peak | demcal φ_peak | Δ | seed φ_cv | demcal φ_cv (± se) | Δ | ψ in the φ_cv window (* not at critical state) |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
+  echo "| η | seed φ_peak | demcal φ_peak (± sd) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.0 41.4 45.5 47.2); seed_cv=(27.6 32.6 37.9 40.9)
   i=0
   for eta in 0 0.1 0.3 0.5; do
-    table_row "$eta" 30 $eta ${seed_pk[$i]} ${seed_cv[$i]}
+    table_row "$tmp/seed-table-2-3.csv" "$eta" 30 $eta ${seed_pk[$i]} ${seed_cv[$i]}
     i=$((i + 1))
   done
   echo

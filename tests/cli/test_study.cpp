@@ -149,5 +149,10 @@ TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
   EXPECT_NE(r.err.find("--reference"), std::string::npos) << r.err;
   r = run_demcal({"study", "timestep", "--knobs", "dt"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  // A reference the scene refuses is named as the user wrote it, not as the grid path
+  // of the study's own job, and refused before the database exists.
+  r = run_demcal({"study", "fidelity", "--reference", "dt=1e9"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--reference: dt = 1e+09: must be in (0, 10]"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.path / "demcal.db"));
 }
