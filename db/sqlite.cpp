@@ -78,11 +78,22 @@ Connection::Connection(const std::string& path, bool read_only) : path_(path) {
 
 // A database demcal may read but not write. A WAL database needs its -shm file, which
 // SQLite creates beside it: where the folder refuses that, the file is read as
-// immutable (no locks, no WAL: what the last checkpoint left, which is everything
-// once its writer has closed; a writer alive in a folder nobody may write is not
-// possible). Returns false when neither works (the caller reports SQLite's error).
+// immutable (no locks, no WAL: what the last checkpoint left). That is everything
+// only when no -wal file holds newer pages (its writer closed cleanly), so immutable
+// is tried only then: a -wal with content (a writer alive, or killed before its
+// checkpoint) would be ignored without a word. Returns false when nothing works
+// (the caller reports SQLite's error).
 bool Connection::open_read_only(const std::string& path) {
+  std::error_code ec;
+  const std::string wal = path + "-wal";
+  const bool wal_empty = !std::filesystem::exists(wal, ec) || std::filesystem::file_size(wal, ec) == 0;
   for (const char* query : {"mode=ro", "immutable=1"}) {
+    if (std::string(query) == "immutable=1" && !wal_empty)
+      throw DbError("cannot read database " + path + ": its write-ahead log " + wal +
+                        " holds changes not yet in the file, and reading them needs SQLite's -shm file beside it, "
+                        "which cannot be made or opened here (open the database once where it may be written, or "
+                        "copy it together with its -wal and -shm files)",
+                    true);
     const int flags = SQLITE_OPEN_READONLY | SQLITE_OPEN_URI | SQLITE_OPEN_NOMUTEX;
     if (sqlite3_open_v2(uri_of(path, query).c_str(), &db_, flags, nullptr) == SQLITE_OK &&
         sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr) == SQLITE_OK)

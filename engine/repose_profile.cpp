@@ -76,14 +76,14 @@ SurfaceProfile surface_profile(const std::vector<Vec3>& pos, const std::vector<d
 SlopeFit fit_slope(const std::vector<double>& x, const std::vector<double>& h, double f_lo, double f_hi) {
   SlopeFit f;
   const int n = static_cast<int>(std::min(x.size(), h.size()));
+  int i_max = 0;
+  for (int i = 1; i < n; ++i)
+    if (h[i] >= h[i_max]) i_max = i;  // ties: the downstream-most maximum
+  if (n > 0) f.h_max = h[i_max];  // the deposit's height, reported even without a slope
   if (n < 3) {
     f.why = "profile has fewer than 3 bins";
     return f;
   }
-  int i_max = 0;
-  for (int i = 1; i < n; ++i)
-    if (h[i] >= h[i_max]) i_max = i;  // ties: the downstream-most maximum
-  f.h_max = h[i_max];
   if (!(f.h_max > 0.0)) {
     f.why = "empty profile";
     return f;

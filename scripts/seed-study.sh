@@ -93,17 +93,28 @@ table_row() {
   local stats
   stats=$(col "$1" theta_deg eta phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
           awk -F'\t' -v t="$3" -v e="$4" -v sp="$5" -v sc="$6" '
-    $1 == t && $2 == e && $3 != "" {
-      n++; pk += $3; pk2 += $3 * $3; cv += $4; cv2 += $4 * $4; se = $5; psi += $6
+    # Each column counts its own packings: a phi_cv or psi left empty (no sample in
+    # the window) is missing, not 0.
+    $1 == t && $2 == e {
+      if ($3 != "") { n++; pk += $3; pk2 += $3 * $3 }
+      if ($4 != "") { nc++; cv += $4; cv2 += $4 * $4; if (se == "") se = $5 }
+      if ($6 != "") { np++; psi += $6 }
       if (index($7, "not at critical state")) star = star "*"
     }
-    function sd(s, s2) { return n > 1 ? sqrt((s2 - s * s / n) / (n - 1)) : 0 }
+    function sd(k, s, s2) { return k > 1 ? sprintf("%.1f", sqrt(max0((s2 - s * s / k) / (k - 1)))) : "—" }
+    function max0(x) { return x > 0 ? x : 0 }
     END {
-      if (n == 0) { printf "| %s | — | failed | — | %s° | failed | — | — |\n", sp, sc; exit }
-      mp = pk / n; mc = cv / n
-      printf "| %s° | %.1f ± %.1f° | %+.1f | %s° | %.1f ± %.1f° | %+.1f | %.1f°%s%s | %d |\n",
-             sp, mp, sd(pk, pk2), mp - sp, sc, mc, n > 1 ? sd(cv, cv2) : se, mc - sc, psi / n,
-             star == "" ? "" : " ", star, n
+      if (n == 0) { printf "| %s° | failed | — | %s° | failed | — | — | 0 |\n", sp, sc; exit }
+      mp = pk / n
+      cvtxt = "failed"; dcv = "—"
+      if (nc > 0) {
+        cvtxt = sprintf("%.1f ± %s°", cv / nc, (nc > 1 ? sd(nc, cv, cv2) : (se == "" ? "—" : sprintf("%.1f", se))))
+        dcv = sprintf("%+.1f", cv / nc - sc)
+      }
+      psitxt = np > 0 ? sprintf("%.1f°", psi / np) : "—"
+      pktxt = n > 1 ? sprintf("%.1f ± %s°", mp, sd(n, pk, pk2)) : sprintf("%.1f°", mp)
+      printf "| %s° | %s | %+.1f | %s° | %s | %s | %s%s%s | %d |\n",
+             sp, pktxt, mp - sp, sc, cvtxt, dcv, psitxt, (star == "" ? "" : " "), star, n
     }')
   echo "| $2 $stats"
 }
@@ -162,7 +173,7 @@ has_rows() { [[ -s "$1" ]] && [[ $(wc -l < "$1") -gt 1 ]]; }
 task_seconds() {
   for j in "$@"; do col "$tmp/$j.csv" task wall_s; done | sort -u | awk -F'\t' '{ s += $2 } END { printf "%.0f", s }'
 }
-wall_total=$(task_seconds seed-dense-grid seed-replicas seed-dense-loose seed-repose)
+wall_total=$(task_seconds seed-dense-grid seed-table-2-2 seed-table-2-3 seed-replicas seed-dense-loose seed-repose)
 wall_walled=$(task_seconds seed-repose-walled)
 wall_damped=$(task_seconds seed-damping-in-shear seed-damping-in-shear-theta)
 

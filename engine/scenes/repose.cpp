@@ -546,8 +546,9 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
       const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
       const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
-      for (std::size_t i = 0; i < p.size(); ++i)
-        if (mobile[i] && p.x[i][0] - p.r[i] > front.x) ++res.grains_beyond_front;
+      if (front.bin >= 0)  // no front, no deposit to be beyond
+        for (std::size_t i = 0; i < p.size(); ++i)
+          if (mobile[i] && p.x[i][0] - p.r[i] > front.x) ++res.grains_beyond_front;
       res.final_height_m = fit.h_max;
       res.front_m = front.x;
       res.runout_m = front.x - W;
