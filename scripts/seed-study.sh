@@ -6,10 +6,10 @@
 #   [DEMCAL=bin] scripts/seed-study.sh [--db FILE] [--workers N] [--out DIR] [--skip-run] [--side-walls] [--damping]
 #
 # --side-walls adds the repose column over eta in a channel between frictional
-# walls 8 d apart (repose-walled.json: ~7,600 grains a task, ~45 min of task time);
+# walls 8 d apart (repose-walled.json: ~7,600 grains a task, ~35 min of task time);
 # the report shows it beside the periodic slab whenever the database holds it.
 # --damping adds the diagnostic runs with local damping left on in shear
-# (damping-in-shear*.json: 44 tasks of 500 grains, ~25 min of task time), not the
+# (damping-in-shear*.json: 44 tasks of 500 grains, ~14 min of task time), not the
 # seed's protocol; the report shows them whenever the database holds them.
 #
 # Resumable: tasks already in the database are not run again, so an interrupted
