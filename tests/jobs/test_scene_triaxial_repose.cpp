@@ -90,13 +90,23 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   for (const auto& t : t23.tasks) keys.insert(t.key);
   EXPECT_EQ(keys.size(), 9u);  // the two tables share theta = 30, eta = 0.1
 
-  // The seed study's job files validate and share their tasks with the dense grid.
-  std::set<std::string> grid;
+  // The seed study's job files validate. The tables run three packings a row: the
+  // first is the dense grid's task, and the three at (30 deg, 0.1) are the replicas job's.
+  std::set<std::string> grid, replicas;
   for (const auto& t : example("seed-study/dense-grid.json").tasks) grid.insert(t.key);
   EXPECT_EQ(grid.size(), 24u);
-  for (const char* f : {"seed-study/table-2-2.json", "seed-study/table-2-3.json"})
-    for (const auto& t : example(f).tasks) EXPECT_EQ(grid.count(t.key), 1u) << f;
-  EXPECT_EQ(example("seed-study/replicas.json").tasks.size(), 3u);
+  for (const auto& t : example("seed-study/replicas.json").tasks) replicas.insert(t.key);
+  EXPECT_EQ(replicas.size(), 3u);
+  for (const char* f : {"seed-study/table-2-2.json", "seed-study/table-2-3.json"}) {
+    const Job table = example(f);
+    EXPECT_EQ(table.tasks.size() % 3, 0u) << f;
+    for (const auto& t : table.tasks) {
+      const bool first = t.params["seed"].get<int>() == 1;
+      EXPECT_EQ(grid.count(t.key), first ? 1u : 0u) << f;
+      const bool centre = t.params["theta_deg"].get<double>() == 30.0 && t.params["eta"].get<double>() == 0.1;
+      EXPECT_EQ(replicas.count(t.key), centre ? 1u : 0u) << f;
+    }
+  }
   EXPECT_EQ(example("seed-study/dense-loose-envelope.json").tasks.size(), 4u);
   EXPECT_EQ(example("seed-study/repose.json").tasks.size(), 5u);
   const Job walled = example("seed-study/repose-walled.json");
