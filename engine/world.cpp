@@ -413,10 +413,7 @@ void World::external_forces(int begin, int end, ThreadAcc& acc) {
     for (int i = begin; i < end; ++i)
       if (!fixed[i]) f[i] += m[i] * g;
   if (alpha == 0.0) return;
-  double net = 0.0;  // the imbalance the damping is about to hide (net_force_sum)
-  for (int i = begin; i < end; ++i)
-    if (!fixed[i]) net += f[i].norm();
-  acc.net_force_sum = net;
+  acc.net_force_sum = free_force_sum(begin, end);  // the imbalance the damping is about to hide
   // Cundall's local damping, -alpha |F| sign(v) per component, with sign(v) written
   // as copysign times (v != 0): the direction of motion is an unpredictable branch.
   // The loop runs over the components as one flat array so that it vectorises; it
@@ -436,12 +433,16 @@ void World::external_forces(int begin, int end, ThreadAcc& acc) {
   }
 }
 
-double World::net_force_sum() const {
-  if (damped_) return net_force_sum_;
+// Sum of |F| over the free grains of [begin, end), as the force arrays hold it now.
+double World::free_force_sum(int begin, int end) const {
   double sum = 0.0;
-  for (std::size_t i = 0; i < p_.size(); ++i)
+  for (int i = begin; i < end; ++i)
     if (!p_.fixed[i]) sum += p_.f[i].norm();
   return sum;
+}
+
+double World::net_force_sum() const {
+  return damped_ ? net_force_sum_ : free_force_sum(0, static_cast<int>(p_.size()));
 }
 
 void World::compute_forces() { evaluate_forces(nl_.needs_rebuild(p_, dom_, skin_, opt_.threads), false); }

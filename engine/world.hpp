@@ -157,6 +157,7 @@ class World {
   }
   void smooth_wall_forces(std::size_t w, const int* first, const int* last, ThreadAcc& acc, WallPartial& sum);
   void external_forces(int begin, int end, ThreadAcc& acc);
+  double free_force_sum(int begin, int end) const;
   void check_finite_and_overlap();
   void check_energy();
 

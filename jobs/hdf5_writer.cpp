@@ -1,5 +1,6 @@
 #include "hdf5_writer.hpp"
 
+#include "part_file.hpp"
 #include "physics_version.hpp"
 
 #include "engine/particles.hpp"
@@ -112,9 +113,9 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
   H5::Exception::dontPrint();
   // Written beside the final name and renamed when whole: a run stopped mid-write
   // (or a full disk) leaves no file at the recorded path that looks valid.
-  const std::string part = path + ".part";
+  PartFile file(path);
   try {
-    H5::H5File f(part, H5F_ACC_TRUNC);
+    H5::H5File f(file.part(), H5F_ACC_TRUNC);
     string_attr(f, "scene", info.scene);
     string_attr(f, "params", params.dump());
     string_attr(f, "task_key", info.task_key);
@@ -128,15 +129,10 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     root.close();
     f.close();  // a failed flush throws here, not silently in a destructor
   } catch (const H5::Exception& e) {
-    std::remove(part.c_str());
     throw std::runtime_error("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
                              " (is the disk full, or the folder not writable?)");
   }
-  if (std::rename(part.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(part.c_str());
-    throw std::runtime_error("cannot move the HDF5 file into place at " + path + ": " + why);
-  }
+  file.commit("HDF5 file");
 }
 
 std::string read_task_key(const std::string& path) {

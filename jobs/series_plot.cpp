@@ -57,27 +57,23 @@ std::string gnuplot_png_terminal(int width, int height) {
          " } else { set terminal png size " + size + " }\n";
 }
 
-ImageFile::ImageFile(std::string out) : out_(std::move(out)) {
-  const std::filesystem::path o(out_);
-  // Same folder (rename stays atomic), same extension (gnuplot's svg terminal does
-  // not care, but a reader of a stray file does).
-  part_ = (o.parent_path() / ("." + o.filename().string() + ".part" + std::to_string(::getpid()) +
-                              o.extension().string())).string();
+namespace {
+// Same folder (rename stays atomic), same extension (gnuplot's svg terminal does not
+// care, but a reader of a stray file does).
+std::string hidden_part_of(const std::string& out) {
+  const std::filesystem::path o(out);
+  return (o.parent_path() / ("." + o.filename().string() + ".part" + std::to_string(::getpid()) +
+                             o.extension().string())).string();
 }
+}  // namespace
 
-ImageFile::~ImageFile() {
-  if (done_) return;
-  std::error_code ec;
-  std::filesystem::remove(part_, ec);
-}
+ImageFile::ImageFile(const std::string& out) : file_(out, hidden_part_of(out)) {}
 
 void ImageFile::commit() {
   std::error_code ec;
-  if (!std::filesystem::exists(part_) || std::filesystem::file_size(part_, ec) == 0 || ec)
-    throw std::runtime_error("gnuplot wrote nothing for " + out_);
-  std::filesystem::rename(part_, out_, ec);
-  if (ec) throw std::runtime_error("cannot put the image in place at " + out_ + ": " + ec.message());
-  done_ = true;
+  if (!std::filesystem::exists(part(), ec) || std::filesystem::file_size(part(), ec) == 0 || ec)
+    throw std::runtime_error("gnuplot wrote nothing for " + file_.path());
+  file_.commit("image");
 }
 
 void plot_series(const PlotRequest& r) {

@@ -1,5 +1,7 @@
 #pragma once
 // Draws columns of a task's stored time series with gnuplot, to PNG or SVG.
+#include "part_file.hpp"
+
 #include <string>
 #include <vector>
 
@@ -31,17 +33,13 @@ std::string gnuplot_png_terminal(int width, int height);
 // removes an uncommitted part.
 class ImageFile {
  public:
-  explicit ImageFile(std::string out);
-  ~ImageFile();
-  ImageFile(const ImageFile&) = delete;
-  ImageFile& operator=(const ImageFile&) = delete;
-  const std::string& part() const { return part_; }
+  explicit ImageFile(const std::string& out);
+  const std::string& part() const { return file_.part(); }
   // Throws std::runtime_error when gnuplot left nothing at part().
   void commit();
 
  private:
-  std::string out_, part_;
-  bool done_ = false;
+  PartFile file_;
 };
 
 }  // namespace demcal::jobs

@@ -1,5 +1,7 @@
 #include "xdmf_writer.hpp"
 
+#include "part_file.hpp"
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -84,22 +86,14 @@ std::string snapshot_xdmf(const std::string& h5_name, const std::vector<Snapshot
 }
 
 void write_snapshot_xdmf(const std::string& path, const std::string& h5_name, const std::vector<Snapshot>& snapshots) {
-  const std::string part = path + ".part";
+  PartFile file(path);
   {
-    std::ofstream f(part, std::ios::trunc);
+    std::ofstream f(file.part(), std::ios::trunc);
     f << snapshot_xdmf(h5_name, snapshots);
     f.close();
-    if (!f) {
-      const std::string why = std::strerror(errno);
-      std::remove(part.c_str());
-      throw std::runtime_error("cannot write the Xdmf file " + part + ": " + why);
-    }
+    if (!f) throw std::runtime_error("cannot write the Xdmf file " + file.part() + ": " + std::strerror(errno));
   }
-  if (std::rename(part.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(part.c_str());
-    throw std::runtime_error("cannot move the Xdmf file into place at " + path + ": " + why);
-  }
+  file.commit("Xdmf file");
 }
 
 }  // namespace demcal::jobs

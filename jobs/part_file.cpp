@@ -1,0 +1,26 @@
+#include "part_file.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <stdexcept>
+
+namespace demcal::jobs {
+
+PartFile::PartFile(std::string path) : path_(std::move(path)), part_(path_ + ".part") {}
+PartFile::PartFile(std::string path, std::string part) : path_(std::move(path)), part_(std::move(part)) {}
+
+PartFile::~PartFile() {
+  if (!done_) std::remove(part_.c_str());
+}
+
+void PartFile::commit(const std::string& what) {
+  if (std::rename(part_.c_str(), path_.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    std::remove(part_.c_str());
+    throw std::runtime_error("cannot move the " + what + " into place at " + path_ + ": " + why);
+  }
+  done_ = true;
+}
+
+}  // namespace demcal::jobs
