@@ -13,10 +13,9 @@ namespace {
   const bool bad = rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT;
   throw DbError(what + ": " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)), bad);
 }
-}  // namespace
 
 // A file: URI for `path` (absolute; '%', '?' and '#' escaped) with a query string.
-static std::string uri_of(const std::string& path, const char* query) {
+std::string uri_of(const std::string& path, const char* query) {
   std::string u = "file:";
   for (char c : std::filesystem::absolute(path).string()) {
     if (c == '%') u += "%25";
@@ -26,6 +25,7 @@ static std::string uri_of(const std::string& path, const char* query) {
   }
   return u + "?" + query;
 }
+}  // namespace
 
 // Why demcal may not write `path` (empty when it may): the file, or the folder that
 // must take SQLite's -wal and -shm files beside it.
