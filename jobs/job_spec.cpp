@@ -20,6 +20,13 @@ namespace {
 const char* const kTopKeys[] = {"name", "description", "scene", "material", "grid",
                                 "replicas", "seed", "threads", "fidelity", "snapshots"};
 
+// A job file nests four levels at most. Far deeper input (a generated or corrupted
+// file) would overflow the stack in the recursive walks over the parsed value (the
+// library's own destructor among them, 150,000 levels: a segmentation fault), so
+// the parser stops at this depth.
+constexpr int kMaxDepth = 64;
+struct TooDeep {};
+
 // JSON lets a key appear twice in an object and the parser keeps the last one: a
 // job with "particles": 50 and, further down, "particles": 80 would run 80 without
 // a word. The parser's callback sees every key; the first repeat is an error.
@@ -29,6 +36,7 @@ nlohmann::json parse_checking_duplicates(const std::string& text) {
   std::string repeated, where;
   auto cb = [&](int depth, nlohmann::json::parse_event_t ev, nlohmann::json& parsed) {
     using E = nlohmann::json::parse_event_t;
+    if ((ev == E::object_start || ev == E::array_start) && depth >= kMaxDepth) throw TooDeep{};
     if (ev == E::object_start) keys.emplace_back();
     if (ev == E::object_end && !keys.empty()) keys.pop_back();
     if (ev == E::key && !keys.empty()) {
@@ -51,6 +59,9 @@ nlohmann::json parse_checking_duplicates(const std::string& text) {
 nlohmann::json parse_text(const std::string& text, const std::string& source) {
   try {
     return parse_checking_duplicates(text);
+  } catch (const TooDeep&) {
+    throw JobError("", source + ": malformed job: objects and arrays nested more than " + std::to_string(kMaxDepth) +
+                           " levels deep (a job file needs four)");
   } catch (const nlohmann::json::parse_error& e) {
     // nlohmann reports a byte offset; people want line and column.
     std::size_t line = 1, col = 1;

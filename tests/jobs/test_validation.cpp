@@ -153,6 +153,22 @@ TEST(Validation, AKeyGivenTwiceInOneObjectIsAnError) {
   EXPECT_EQ(error_of(kBase), "");
 }
 
+// A corrupted or generated file nested 150,000 deep overflowed the stack (a
+// segmentation fault, no message); nesting is refused long before that.
+TEST(Validation, DeepNestingIsRefusedWithAMessage) {
+  for (const int depth : {70, 150000}) {
+    const std::string text = "{\"name\": \"x\", \"scene\": \"collision\", \"grid\": {\"a\": " +
+                             std::string(depth, '[') + std::string(depth, ']') + "}}";
+    const std::string msg = error_of(text);
+    EXPECT_NE(msg.find("job.json: malformed job: objects and arrays nested more than 64 levels"), std::string::npos)
+        << depth << ": " << msg;
+  }
+  // Within the limit the nesting itself is no error (the unknown key is).
+  const std::string ok = "{\"name\": \"x\", \"scene\": \"collision\", \"grid\": {\"a\": " + std::string(40, '[') +
+                         std::string(40, ']') + "}}";
+  EXPECT_EQ(error_of(ok).find("nested"), std::string::npos) << error_of(ok);
+}
+
 TEST(Validation, NotAnObject) { EXPECT_NE(error_of("[1, 2]").find("JSON object"), std::string::npos); }
 
 TEST(Validation, MissingFile) {
