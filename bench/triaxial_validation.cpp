@@ -3,7 +3,7 @@
 //
 //   bench_triaxial_validation [key=value ...]
 //     particles=2000 packing=dense|loose theta=30 eta=0.1 b=1 p0=100e3 rate=1e-4
-//     strain=0.30 dt_factor=0.3 damping=0.3 shear_damping=0 ufr=0.01 stol=0.01 phi0=0.30 seed=1
+//     strain=0.30 dt_factor=0.3 fdt=0 damping=0.3 shear_damping=0 ufr=0.01 stol=0.01 phi0=0.30 seed=1
 //     twist=0 threads=1 budget=400000 alpha=0.5 beta=0.02 csv=triaxial_series.csv quiet=0
 // Prints the stages, the metrics and the wall time; writes the series as CSV.
 #include "engine/scenes/triaxial.hpp"
@@ -51,7 +51,7 @@ struct Printer : Observer {
 const char* const kUsage =
     "usage: bench_triaxial_validation [key=value ...]\n"
     "  particles=2000 packing=dense|loose theta=30 eta=0.1 b=1 twist=0 p0=100e3 rate=1e-4 strain=0.30\n"
-    "  ramp lat_rate dt_factor=0.3 damping=0.3 shear_damping=0 pfactor unload ufr=0.01 stol=0.01 phi0=0.30\n"
+    "  ramp lat_rate dt_factor=0.3 fdt=0 damping=0.3 shear_damping=0 pfactor unload ufr=0.01 stol=0.01 phi0=0.30\n"
     "  prep_rate budget=400000 alpha=0.5 beta=0.02 seed=1 threads=1 csv=triaxial_series.csv quiet=0\n";
 
 int main(int argc, char** argv) {
@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
   c.cv_to = std::min(c.cv_to, c.axial_strain);
   if (c.axial_strain < 0.3) c.cv_from = c.axial_strain * 2.0 / 3.0;
   c.dt_factor = num("dt_factor", c.dt_factor);
+  c.frictionless_dt_scale = num("fdt", c.frictionless_dt_scale);
   c.prep_damping = num("damping", c.prep_damping);
   c.shear_damping = num("shear_damping", c.shear_damping);
   c.prep_pressure_factor = num("pfactor", c.prep_pressure_factor);

@@ -122,7 +122,7 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     string_attr(f, "status", info.status);
     if (!info.message.empty()) string_attr(f, "message", info.message);
     double_attr(f, "task_id", static_cast<double>(info.task_id));
-    double_attr(f, "physics_version", kPhysicsVersion);
+    double_attr(f, "physics_version", physics_version(info.scene));
     H5::Group root = f.createGroup("series");
     for (const auto& s : series) write_series(root, s);
     for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);

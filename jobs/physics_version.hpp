@@ -1,13 +1,25 @@
 #pragma once
+#include <string>
 
 namespace demcal::jobs {
 
-// Part of every task's content key. Bump when engine physics changes results, so
-// that work stored under the old physics is not reused as if it were current.
-//   1: the first.
-//   2: the unbalanced-force ratio reads the net force before local damping, so
-//      damped preparation stages (triaxial) end when the undamped imbalance passes;
-//      the repose slope is fitted over the deposit up to its front, not past it.
-constexpr int kPhysicsVersion = 2;
+// Part of every task's content key, per scene. Bump a scene's version when engine
+// physics changes that scene's results, so that work stored under the old physics is
+// not reused as if it were current, and work a change does not touch is kept.
+//   1: the first (every scene).
+//   2 (every scene): the unbalanced-force ratio reads the net force before local
+//      damping, so damped preparation stages (triaxial) end when the undamped
+//      imbalance passes; the repose slope is fitted over the deposit up to its
+//      front, not past it.
+//   3 (triaxial): the dense preparation's frictionless stages step at the same
+//      fraction of their own critical step as the rest (about 1.96x dt for the
+//      seed's material; triaxial.frictionless_dt_scale), the unloading ramp lasting
+//      as long in simulated time as before.
+constexpr int kTriaxialPhysicsVersion = 3;
+constexpr int kOtherPhysicsVersion = 2;  // collision, repose
+
+inline int physics_version(const std::string& scene) {
+  return scene == "triaxial" ? kTriaxialPhysicsVersion : kOtherPhysicsVersion;
+}
 
 }  // namespace demcal::jobs

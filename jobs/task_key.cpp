@@ -19,7 +19,7 @@ std::uint64_t fnv1a(const std::string& s, std::uint64_t h) {
 }  // namespace
 
 std::string task_key(const std::string& scene, const nlohmann::json& params, bool snapshots) {
-  const std::string text = scene + "\n" + params.dump() + "\nphysics=" + std::to_string(kPhysicsVersion) +
+  const std::string text = scene + "\n" + params.dump() + "\nphysics=" + std::to_string(physics_version(scene)) +
                            (snapshots ? "\nsnapshots" : "");
   char buf[40];
   std::snprintf(buf, sizeof buf, "%016llx%016llx", static_cast<unsigned long long>(fnv1a(text, 0xcbf29ce484222325ULL)),

@@ -7,7 +7,7 @@
 namespace demcal::jobs {
 
 // Hash of the scene, the canonical dump of the resolved parameters (keys sorted,
-// reals as doubles) and kPhysicsVersion; 32 hex digits. A task that writes particle
+// reals as doubles) and the scene's physics_version; 32 hex digits. A task that writes particle
 // snapshots is other work than one that does not (its file holds them): `snapshots`
 // adds to the key, so turning them on runs the tasks again instead of reusing files
 // without any.

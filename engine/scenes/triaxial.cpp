@@ -27,6 +27,23 @@ Material triaxial_seed_material() {
 
 const char* to_string(Packing p) { return p == Packing::dense ? "dense" : "loose"; }
 
+namespace {
+// The dense preparation's first law: theta = eta = 0, no tangential spring.
+ContactParams frictionless(ContactParams law) {
+  law.ks = 0.0;
+  law.tan_theta = 0.0;
+  law.eta = 0.0;
+  return law;
+}
+
+std::string fmt(double v, int prec = 4) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
+}  // namespace
+
 StepForecast TriaxialConfig::step_forecast() const {
   LimitInputs in;
   in.law = contact_params(material);  // the target law, the stiffest one the run uses
@@ -80,6 +97,19 @@ void TriaxialConfig::validate() const {
     throw ConfigError("triaxial.shear_servo_strain_rate", "must be finite and >= 0 (0: 20 * strain_rate)");
   if (!std::isfinite(dt) || dt < 0.0) throw ConfigError("numerics.dt", "must be finite and >= 0");
   if (dt == 0.0) positive(dt_factor, "numerics.dt_factor");
+  if (!std::isfinite(frictionless_dt_scale) || frictionless_dt_scale < 0.0)
+    throw ConfigError("numerics.frictionless_dt_scale", "must be finite and >= 0 (0: the same margin to the critical step)");
+  if (packing == Packing::dense && frictionless_dt_scale > 0.0) {
+    LimitInputs in;
+    in.law = frictionless(contact_params(material));
+    in.has_walls = true;
+    const StepForecast f = forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
+    if (f.dt * frictionless_dt_scale > f.dt_critical)
+      throw ConfigError("numerics.frictionless_dt_scale",
+                        "gives a frictionless step of " + fmt(f.dt * frictionless_dt_scale) +
+                            " s, above that law's critical step " + fmt(f.dt_critical) + " s (" + f.mode + "); at most " +
+                            fmt(f.dt_critical / f.dt));
+  }
   positive(max_overlap_fraction, "numerics.max_overlap_fraction");
   if (!(sample_strain > 0.0 && sample_strain <= axial_strain))
     throw ConfigError("triaxial.sample_strain", "must lie in (0, axial_strain]");
@@ -128,6 +158,7 @@ Metrics TriaxialResult::metrics() const {
                      {"shear_stress_error_max", shear_stress_error_max},
                      {"dt", dt},
                      {"dt_over_critical", dt_critical > 0 ? dt / dt_critical : 0.0},
+                     {"dt_frictionless", dt_frictionless},
                      {"grain_density", grain_density}};
   m.insert(m.end(), mech.begin(), mech.end());
   for (const auto& s : stages) {
@@ -279,13 +310,6 @@ double kinetic_energy(const Particles& p) {
     e += 0.5 * p.m[i] * p.v[i].squaredNorm() + 0.5 * (0.4 * p.m[i] * p.r[i] * p.r[i]) * p.w[i].squaredNorm();
   }
   return e;
-}
-
-std::string fmt(double v, int prec = 4) {
-  std::ostringstream os;
-  os.precision(prec);
-  os << v;
-  return os.str();
 }
 
 // Servo all six walls to p0 until equilibrium (two consecutive passing checks).
@@ -446,10 +470,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   dom.hi = hi;
 
   const ContactParams target = contact_params(mat);
-  ContactParams smooth = target;  // dense step (i): theta = eta = 0
-  smooth.ks = 0.0;
-  smooth.tan_theta = 0.0;
-  smooth.eta = 0.0;
+  const ContactParams smooth = frictionless(target);  // dense step (i)
   // The time step is checked against the target law (the stiffest one used).
   World world(std::move(p), box_walls(lo, hi), dom, target, opt);
   {
@@ -458,7 +479,13 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     res.dt_critical = lim.governing().dt_critical;
     res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
   }
-  if (cfg.packing == Packing::dense) world.set_contact_params(smooth);
+  if (cfg.packing == Packing::dense) {
+    world.set_contact_params(smooth);
+    const double dtc = stability_limits(world).governing().dt_critical;
+    const double scale = cfg.frictionless_dt_scale > 0.0 ? cfg.frictionless_dt_scale : dtc / res.dt_critical;
+    res.dt_frictionless = opt.dt * scale;
+    world.set_dt(res.dt_frictionless);  // refuses a step above the frictionless law's limit
+  }
 
   Rig rig{world, cfg, obs, vs, {}, "", cfg.confining_pressure};
   const ServoGains prep_gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * cfg.prep_strain_rate * width};
@@ -479,8 +506,12 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
         // keeps creeping (UFR 0.01-0.045 for 160,000 steps in one 2,000-grain run, a
         // round-off decides whether it dips below 0.01 early), while friction,
         // switched on next, arrests it within the stabilise stage, which judges UFR.
-        res.stages.push_back(
-            servo_to_equilibrium(rig, "unloading", p0, prep_gains, 0.1, 0.15, cfg.unloading_steps, false));
+        // unloading_steps counts steps of dt: the ramp lasts as long in simulated time
+        // whatever step the frictionless stages take.
+        res.stages.push_back(servo_to_equilibrium(
+            rig, "unloading", p0, prep_gains, 0.1, 0.15,
+            std::lround(static_cast<double>(cfg.unloading_steps) * opt.dt / world.dt()), false));
+      world.set_dt(opt.dt);  // before the stiffer law, which would refuse the larger step
       world.set_contact_params(target);
       res.stages.push_back(stabilise(rig, "stabilise"));
       res.stages.push_back(servo_to_equilibrium(rig, "recompression", cfg.confining_pressure, prep_gains, 0.15, 0.3));

@@ -73,7 +73,7 @@ struct TriaxialConfig {
   // sqrt(factor) times faster in steps at the higher pressure; a frictionless
   // packing keeps its structure when unloaded. 1: straight to p0.
   double prep_pressure_factor = 100.0;
-  long unloading_steps = 20000;       // geometric ramp of the unloading target
+  long unloading_steps = 20000;       // geometric ramp of the unloading target, in steps of dt (simulated time: unloading_steps * dt)
   double prep_strain_rate = 0.02;     // wall speed cap in preparation, as (2 v / L) [1/s]
   double stress_tolerance = 0.01;     // |sigma_wall - p0| / p0 on every wall
   double ufr_tolerance = 0.01;        // unbalanced-force ratio
@@ -89,6 +89,12 @@ struct TriaxialConfig {
   // Numerics
   double dt = 0.0;          // [s]; 0: dt_factor * sqrt(m_min / Kn), m_min after density scaling
   double dt_factor = 0.3;
+  // Step of the dense preparation's frictionless stages (compression, unloading) as a
+  // multiple of dt. 0: the ratio of the frictionless law's critical step to the
+  // target law's, so that those stages run at the same fraction of their own
+  // stability limit as the rest (the tangential and rolling springs they lack are
+  // the stiff modes: about 1.96x for the seed's material). 1: dt throughout.
+  double frictionless_dt_scale = 0.0;
   double max_overlap_fraction = 0.25;
 
   // Output
@@ -164,6 +170,7 @@ struct TriaxialResult {
   long particles = 0;
   double grain_density = 0, dt = 0, dt_critical = 0;
   std::string critical_mode;
+  double dt_frictionless = 0;  // dense preparation's compression and unloading (0: loose, none)
   double d_mean = 0;
   bool local_damping_used = false;
   double prep_damping = 0;

@@ -59,6 +59,8 @@ std::vector<ParamSpec> triaxial_params() {
   // Numerics: dt or dt_factor (resolve() rejects both).
   p.push_back(real_param(kSection, "dt", "dt", nullptr).above(0).below(1));
   p.push_back(real_param(kSection, "dt_factor", "dt_factor", nullptr).above(0).at_most(10));
+  // Absent unless given (the engine's 0: the same margin to the critical step).
+  p.push_back(real_param(kSection, "frictionless_dt_scale", "frictionless_dt_scale", nullptr).above(0).at_most(10));
   p.push_back(real_param(kSection, "max_overlap_fraction", "max_overlap_fraction", d.max_overlap_fraction)
                   .above(0).at_most(1));
   // Output; the critical-state window defaults to the last third of the shear.
@@ -99,6 +101,7 @@ engine::TriaxialConfig config_from(const nlohmann::json& p) {
   c.shear_servo_strain_rate = p.at("shear_servo_strain_rate").get<double>();
   c.dt = p.value("dt", 0.0);
   if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
+  c.frictionless_dt_scale = p.value("frictionless_dt_scale", 0.0);
   c.max_overlap_fraction = p.at("max_overlap_fraction").get<double>();
   c.sample_strain = p.at("sample_strain").get<double>();
   c.cv_from = p.at("cv_from").get<double>();

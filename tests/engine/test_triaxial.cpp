@@ -167,6 +167,17 @@ TEST(TriaxialConfig, ValidateNamesTheField) {
   c = TriaxialConfig{};
   c.initial_solid_fraction = 0.6;
   EXPECT_EQ(rejected_field(c), "triaxial.initial_solid_fraction");
+  c = TriaxialConfig{};
+  c.frictionless_dt_scale = -1.0;
+  EXPECT_EQ(rejected_field(c), "numerics.frictionless_dt_scale");
+  // 0.3 x 5 = 1.5 sqrt(m_min/Kn): past the normal mode of two smallest grains (1.414).
+  c.frictionless_dt_scale = 5.0;
+  EXPECT_EQ(rejected_field(c), "numerics.frictionless_dt_scale");
+  c.frictionless_dt_scale = 4.5;
+  EXPECT_EQ(rejected_field(c), "");
+  c.frictionless_dt_scale = 5.0;
+  c.packing = Packing::loose;  // no frictionless stage: the scale is not used
+  EXPECT_EQ(rejected_field(c), "");
 }
 
 TEST(TriaxialScene, ServoReachesP0WithinOnePercent) {
@@ -186,6 +197,51 @@ TEST(TriaxialScene, ServoReachesP0WithinOnePercent) {
   for (const char* s : {"sigma1", "sigma2", "sigma3"}) EXPECT_NEAR(col(r, 0, s), 100e3, 1e3) << s;
   // Lateral walls hold sigma3 during shear too.
   EXPECT_LT(r.shear_stress_error_mean, 0.05);
+}
+
+// The dense preparation's frictionless stages lack the tangential and rolling springs,
+// the law's stiff modes: they step at the same fraction of their own critical step
+// (about 1.96 dt for the seed's material), and the unloading ramp keeps its simulated
+// duration (unloading_steps steps of dt).
+TEST(TriaxialScene, FrictionlessStagesStepAtTheSameMarginToTheirOwnLimit) {
+  const TriaxialResult& r = cached("dense");
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  const TriaxialConfig c = small(Packing::dense);
+  EXPECT_NEAR(r.dt_frictionless / r.dt, 1.956, 0.05);
+  const auto m = r.metrics();
+  const auto it = std::find_if(m.begin(), m.end(), [](const auto& kv) { return kv.first == "dt_frictionless"; });
+  ASSERT_NE(it, m.end());
+  EXPECT_EQ(it->second, r.dt_frictionless);
+  ASSERT_EQ(r.stages[1].name, "unloading");
+  const double ramp = static_cast<double>(c.unloading_steps) * r.dt / r.dt_frictionless;
+  EXPECT_GE(r.stages[1].steps, ramp);
+  EXPECT_LE(r.stages[1].steps, ramp + 20 * c.check_interval);
+  EXPECT_NEAR(r.stages[1].time_s, c.unloading_steps * r.dt, 20 * c.check_interval * r.dt_frictionless);
+  EXPECT_EQ(cached("loose").dt_frictionless, 0.0);  // no frictionless stage
+}
+
+// The same preparation at one step throughout (scale 1, physics version 2) takes more
+// compression steps (about twice from 500 grains up; these 200 come to rest in
+// 12,750 against 14,750) and ends in the same state.
+TEST(TriaxialScene, FrictionlessStepScaleOneStepsAtDtThroughout) {
+  TriaxialConfig c = small(Packing::dense);
+  c.particles = 200;
+  c.axial_strain = 0.004;
+  c.cv_from = 0.002;
+  c.cv_to = 0.004;
+  c.sample_strain = 0.001;
+  TriaxialResult runs[2];  // the default step, then scale 1
+  for (const int k : {0, 1}) {
+    c.frictionless_dt_scale = k;
+    runs[k] = run_triaxial(c);
+    ASSERT_TRUE(runs[k].outcome.ok()) << runs[k].outcome.message;
+  }
+  const TriaxialResult &fast = runs[0], &same = runs[1];
+  EXPECT_EQ(same.dt_frictionless, same.dt);
+  EXPECT_GT(same.stages[0].steps, fast.stages[0].steps);
+  EXPECT_GT(same.stages[1].steps, c.unloading_steps);  // the ramp, then two passing checks
+  EXPECT_LT(fast.stages[1].steps, same.stages[1].steps);
+  EXPECT_NEAR(fast.porosity_initial, same.porosity_initial, 0.01);
 }
 
 TEST(TriaxialScene, WallAndLoveWeberStressesAgreeInEquilibrium) {

@@ -113,11 +113,15 @@ TEST(Grid, KeyDependsOnSceneParamsAndIsStable) {
 
 TEST(Grid, KeysDoNotChangeBetweenBuilds) {
   // Stored databases are matched by key: a key that changed with a build (hash,
-  // JSON number formatting, field order) would rerun every finished task. This one
-  // was computed outside the code (FNV-1a, 64 bit, two bases, over
-  // "collision\n{\"a\":1.0,\"b\":\"x\"}\nphysics=2"); the physics version is in the text.
-  ASSERT_EQ(demcal::jobs::kPhysicsVersion, 2) << "a new physics version changes every key: update this test on purpose";
+  // JSON number formatting, field order) would rerun every finished task. These were
+  // computed outside the code (FNV-1a, 64 bit, two bases, over
+  // "collision\n{\"a\":1.0,\"b\":\"x\"}\nphysics=2" and the same for "triaxial" with
+  // physics=3); each scene's physics version is in its text.
+  ASSERT_EQ(demcal::jobs::physics_version("collision"), 2) << "a new physics version changes the scene's keys: update this test on purpose";
+  ASSERT_EQ(demcal::jobs::physics_version("repose"), 2) << "a new physics version changes the scene's keys: update this test on purpose";
+  ASSERT_EQ(demcal::jobs::physics_version("triaxial"), 3) << "a new physics version changes the scene's keys: update this test on purpose";
   EXPECT_EQ(demcal::jobs::task_key("collision", json{{"b", "x"}, {"a", 1.0}}), "50c066ebd614bccdec7efb5d7d0f281a");
+  EXPECT_EQ(demcal::jobs::task_key("triaxial", json{{"b", "x"}, {"a", 1.0}}), "28b49815f93f55aa5cb541c3054dd287");
 }
 
 TEST(Grid, FidelitySelectsDefaultSteps) {
