@@ -1,6 +1,7 @@
 #include "runner.hpp"
 
 #include "liveness.hpp"
+#include "physics_version.hpp"
 #include "stop_signal.hpp"
 #include "progress.hpp"
 #include "worker.hpp"
@@ -311,17 +312,26 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
     if (shard.contains(t.index))
       tasks.push_back({t.key, job.scene, t.params.dump(), static_cast<std::int64_t>(t.index)});
   std::vector<std::int64_t> dropped;
-  const std::int64_t id = store.put_job(job.name, job.spec.dump(), tasks, shard.active(), &dropped);
+  const std::string spec = job.spec.dump();
+  const std::optional<std::string> earlier = store.job_spec(job.name);
+  const std::int64_t id = store.put_job(job.name, spec, tasks, shard.active(), &dropped);
   if (!dropped.empty()) {
     // A job is its latest spec; without this line the tasks of an edited grid
     // would leave the job (and its fits and maps) unannounced.
     std::string ids;
     for (std::size_t k = 0; k < dropped.size() && k < 10; ++k) ids += (k ? "," : "") + std::to_string(dropped[k]);
     if (dropped.size() > 10) ids += ",...";
-    log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()
-        << " task(s) of the earlier spec are no longer part of it (ids " << ids
-        << "; they and their results stay in the database: demcal query --where task=ID). Give the job another "
-           "name to keep both\n";
+    const std::string kept = " task(s) of the last run are no longer part of it (ids " + ids +
+                             "; they and their results stay in the database: demcal query --where task=ID)";
+    if (earlier && *earlier == spec)
+      // The same file: the keys moved because this build computes the scene differently.
+      log << "job " << job.name << ": the same spec as the last run's, but this build's physics for scene \""
+          << job.scene << "\" is version " << physics_version(job.scene)
+          << " (jobs/physics_version.hpp says what changed) or its defaults moved, so its tasks run again; "
+          << dropped.size() << kept << "\n";
+    else
+      log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()
+          << kept << ". Give the job another name to keep both\n";
   }
   return id;
 }

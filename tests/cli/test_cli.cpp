@@ -1,4 +1,5 @@
 #include "cli_util.hpp"
+#include "dist_util.hpp"
 
 #include "jobs/hdf5_writer.hpp"
 #include "jobs/worker.hpp"
@@ -421,5 +422,24 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
   ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
   const Result r = run_demcal({"run", "b.json"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.err.find("1 task(s) of the earlier spec are no longer part of it"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("its spec differs from the last run's in this database; 1 task(s) of the last run are no "
+                       "longer part of it"),
+            std::string::npos)
+      << r.err;
+}
+
+// The same job file after an upgrade that changed a scene's physics (every key moves):
+// the run says the build did it, not that the user edited the spec.
+TEST(Cli, ARerunAfterAPhysicsChangeSaysSoNotThatTheSpecChanged) {
+  TempDir d;
+  write(d.file("a.json"), collision_job("small", {0.05, 0.1}));
+  ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
+  demcal::test::sql(d.file("demcal.db"), "UPDATE tasks SET key = 'old-' || key");  // as an older build keyed them
+  const Result r = run_demcal({"run", "a.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("the same spec as the last run's, but this build's physics for scene \"collision\" is version 2"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("2 task(s) of the last run are no longer part of it"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("spec differs"), std::string::npos) << r.err;
 }
