@@ -88,10 +88,12 @@ StabilityLimits stability_limits(const LimitInputs& in) {
   return out;
 }
 
-StabilityLimits stability_limits(const World& world, double /*dt*/) {
+StabilityLimits stability_limits(const World& world, double /*dt*/) { return stability_limits(world, world.law()); }
+
+StabilityLimits stability_limits(const World& world, const ContactParams& law_in) {
   const Particles& p = world.particles();
   LimitInputs in;
-  in.law = world.law();
+  in.law = law_in;
   in.m_min = 1e300;
   in.m_max = 0.0;
   for (std::size_t i = 0; i < p.size(); ++i) {

@@ -39,6 +39,8 @@ StabilityLimits stability_limits(const LimitInputs& in);
 // Limits for a world's grains, walls and current contact parameters; `dt` (if > 0)
 // only changes nothing but is accepted for symmetry with set_dt.
 StabilityLimits stability_limits(const World& world, double dt = 0.0);
+// The same grains and walls under another law (one a stage is about to switch to).
+StabilityLimits stability_limits(const World& world, const ContactParams& law);
 
 // Throws TimestepError naming the governing mode when dt exceeds its limit.
 void check_timestep(double dt, const StabilityLimits& limits);

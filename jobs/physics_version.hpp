@@ -12,9 +12,10 @@ namespace demcal::jobs {
 //      imbalance passes; the repose slope is fitted over the deposit up to its
 //      front, not past it.
 //   3 (triaxial): the dense preparation's frictionless stages step at the same
-//      fraction of their own critical step as the rest (about 1.96x dt for the
-//      seed's material; triaxial.frictionless_dt_scale), the unloading ramp lasting
-//      as long in simulated time as before.
+//      fraction of their own critical step as the material's full law takes of
+//      its (about 1.96x dt for the seed's material, whatever theta and eta;
+//      triaxial.frictionless_dt_scale), the unloading ramp lasting as long in
+//      simulated time as before.
 constexpr int kTriaxialPhysicsVersion = 3;
 constexpr int kOtherPhysicsVersion = 2;  // collision, repose
 

@@ -327,7 +327,8 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
       // The same file: the keys moved because this build computes the scene differently.
       log << "job " << job.name << ": the same spec as the last run's, but this build's physics for scene \""
           << job.scene << "\" is version " << physics_version(job.scene)
-          << " (jobs/physics_version.hpp says what changed) or its defaults moved, so its tasks run again; "
+          << " (jobs/physics_version.hpp says what changed) or its defaults moved, so its tasks are new work (run now, or "
+             "reused where another job already ran them with this build); "
           << dropped.size() << kept << "\n";
     else
       log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()

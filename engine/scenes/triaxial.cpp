@@ -36,6 +36,22 @@ ContactParams frictionless(ContactParams law) {
   return law;
 }
 
+// The frictionless stages' step over dt: the frictionless law's critical step over
+// that of the material's full law, its tangential and rolling springs both counted
+// whatever theta and eta are, so that every task of a (theta, eta) grid prepares the
+// same packing from the same seed (eta = 0 has no rolling mode, and a ratio to its
+// own law's limit would prepare its column differently). Where dt is beyond the full
+// law's limit (possible only without rolling), the ratio to the target law's keeps
+// the frictionless step within its own.
+double frictionless_step_ratio(const World& frictionless_world, ContactParams full, double dt) {
+  const double dtc = stability_limits(frictionless_world).governing().dt_critical;
+  const double dtc_target = stability_limits(frictionless_world, full).governing().dt_critical;
+  full.tan_theta = std::max(full.tan_theta, 1.0);  // any value > 0 counts the springs
+  full.eta = std::max(full.eta, 1.0);
+  const double dtc_full = stability_limits(frictionless_world, full).governing().dt_critical;
+  return dtc / (dt <= dtc_full ? dtc_full : dtc_target);
+}
+
 std::string fmt(double v, int prec = 4) {
   std::ostringstream os;
   os.precision(prec);
@@ -99,7 +115,8 @@ void TriaxialConfig::validate() const {
   if (dt == 0.0) positive(dt_factor, "numerics.dt_factor");
   if (!std::isfinite(frictionless_dt_scale) || frictionless_dt_scale < 0.0)
     throw ConfigError("numerics.frictionless_dt_scale", "must be finite and >= 0 (0: the same margin to the critical step)");
-  if (packing == Packing::dense && frictionless_dt_scale > 0.0) {
+  // A dt past its own limit is refused for itself (step_forecast), not blamed on the scale.
+  if (packing == Packing::dense && frictionless_dt_scale > 0.0 && !step_forecast().exceeds()) {
     LimitInputs in;
     in.law = frictionless(contact_params(material));
     in.has_walls = true;
@@ -481,8 +498,8 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   }
   if (cfg.packing == Packing::dense) {
     world.set_contact_params(smooth);
-    const double dtc = stability_limits(world).governing().dt_critical;
-    const double scale = cfg.frictionless_dt_scale > 0.0 ? cfg.frictionless_dt_scale : dtc / res.dt_critical;
+    const double scale = cfg.frictionless_dt_scale > 0.0 ? cfg.frictionless_dt_scale
+                                                          : frictionless_step_ratio(world, target, opt.dt);
     res.dt_frictionless = opt.dt * scale;
     world.set_dt(res.dt_frictionless);  // refuses a step above the frictionless law's limit
   }

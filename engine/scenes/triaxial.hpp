@@ -90,10 +90,11 @@ struct TriaxialConfig {
   double dt = 0.0;          // [s]; 0: dt_factor * sqrt(m_min / Kn), m_min after density scaling
   double dt_factor = 0.3;
   // Step of the dense preparation's frictionless stages (compression, unloading) as a
-  // multiple of dt. 0: the ratio of the frictionless law's critical step to the
-  // target law's, so that those stages run at the same fraction of their own
-  // stability limit as the rest (the tangential and rolling springs they lack are
-  // the stiff modes: about 1.96x for the seed's material). 1: dt throughout.
+  // multiple of dt. 0: the ratio of the frictionless law's critical step to that of
+  // the material's full law (tangential and rolling springs, the stiff modes the
+  // frictionless law lacks, counted whatever theta and eta are): those stages run at
+  // the same fraction of their own limit as the rest, about 1.96x for the seed's
+  // material, the same for every task of a (theta, eta) grid. 1: dt throughout.
   double frictionless_dt_scale = 0.0;
   double max_overlap_fraction = 0.25;
 

@@ -216,12 +216,16 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 // a nominal inertial number above the limit is a warning every such task will carry.
 std::string advice(const nlohmann::json& p) {
   const engine::TriaxialConfig c = config_from(p);
-  const double i0 = c.nominal_inertial_number();
-  if (!(i0 > c.quasi_static_inertial)) return "";
   std::ostringstream os;
   os.precision(2);
-  os << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
-     << c.quasi_static_inertial << ": the run will warn not quasi-static";
+  const double i0 = c.nominal_inertial_number();
+  if (i0 > c.quasi_static_inertial)
+    os << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
+       << c.quasi_static_inertial << ": the run will warn not quasi-static";
+  // Given, it changes the task's key and nothing a loose sample computes.
+  if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
+    os << (os.tellp() > 0 ? "; " : "")
+       << "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
   return os.str();
 }
 

@@ -220,6 +220,30 @@ TEST(TriaxialScene, FrictionlessStagesStepAtTheSameMarginToTheirOwnLimit) {
   EXPECT_EQ(cached("loose").dt_frictionless, 0.0);  // no frictionless stage
 }
 
+// The frictionless stages do not depend on theta or eta, and neither does their step:
+// every column of a (theta, eta) grid, eta = 0 (no rolling mode) included, starts
+// from the same packing for the same seed.
+TEST(TriaxialScene, FrictionlessStagesAreTheSameForEveryThetaAndEta) {
+  std::vector<TriaxialResult> runs;
+  for (const auto& [theta, eta] : {std::pair{30.0, 0.1}, std::pair{30.0, 0.0}, std::pair{15.0, 0.5}}) {
+    TriaxialConfig c = small(Packing::dense, theta, eta);
+    c.particles = 200;
+    c.axial_strain = 0.004;
+    c.cv_from = 0.002;
+    c.cv_to = 0.004;
+    c.sample_strain = 0.001;
+    runs.push_back(run_triaxial(c));
+    ASSERT_TRUE(runs.back().outcome.ok()) << runs.back().outcome.message;
+  }
+  for (std::size_t k = 1; k < runs.size(); ++k) {
+    EXPECT_EQ(runs[k].dt_frictionless, runs[0].dt_frictionless) << k;
+    for (int s = 0; s < 2; ++s) {  // compression, unloading
+      EXPECT_EQ(runs[k].stages[s].steps, runs[0].stages[s].steps) << k << " " << runs[k].stages[s].name;
+      EXPECT_EQ(runs[k].stages[s].porosity, runs[0].stages[s].porosity) << k << " " << runs[k].stages[s].name;
+    }
+  }
+}
+
 // The same preparation at one step throughout (scale 1, physics version 2) takes more
 // compression steps (about twice from 500 grains up; these 200 come to rest in
 // 12,750 against 14,750) and ends in the same state.

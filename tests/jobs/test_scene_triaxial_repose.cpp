@@ -69,6 +69,23 @@ Job example(const char* name) { return demcal::jobs::load_job_file(std::string(D
 
 // ---- parameters and validation -------------------------------------------------
 
+// A loose sample has no frictionless stage: the scale changes its key and nothing else.
+TEST(TriaxialReposeScenes, FrictionlessStepScaleOnALooseSampleIsNotedUnused) {
+  const char* note = "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
+  auto notes_of = [](const json& j) {
+    std::string all;
+    for (const auto& n : parse(j).notes) all += n + "\n";
+    return all;
+  };
+  json j = triaxial_base();
+  j["triaxial"]["frictionless_dt_scale"] = 1.0;
+  EXPECT_EQ(notes_of(j).find(note), std::string::npos) << notes_of(j);  // dense: used
+  j["triaxial"]["packing"] = "loose";
+  EXPECT_NE(notes_of(j).find(note), std::string::npos) << notes_of(j);
+  j["triaxial"].erase("frictionless_dt_scale");
+  EXPECT_EQ(notes_of(j).find(note), std::string::npos) << notes_of(j);
+}
+
 TEST(TriaxialReposeScenes, ExamplesValidate) {
   const Job t22 = example("table-2-2.json");
   EXPECT_EQ(t22.scene, "triaxial");
