@@ -19,9 +19,16 @@ cat > "$T/j.json" << 'JOB'
  "collision": {"particles": 20, "steps": 200, "sample_every": 20}, "grid": {"dt_factor": [0.1, 0.2]},
  "seed": 1, "threads": 1}
 JOB
+# A (theta, eta) grid whose stored metric a fit can invert (instant: 20 grains).
+cat > "$T/f.json" << 'JOB'
+{"name": "rofit", "scene": "collision", "material": {"kn": 3e7, "diameter": {"min": 0.001, "max": 0.002}},
+ "collision": {"particles": 20, "steps": 200, "sample_every": 20, "keep_friction": true},
+ "grid": {"theta_deg": [10, 20, 30], "eta": [0.0, 0.1, 0.2]}, "seed": 1, "threads": 1}
+JOB
 mkdir "$T/shut" "$T/open" "$T/outs"
 chmod 777 "$T/outs"  # where the refused runs would have put their HDF5 files
 "$T/demcal" run "$T/j.json" --db "$T/shut/x.db" --out "$T/out" > /dev/null 2>&1 || { echo "setup run failed"; exit 1; }
+"$T/demcal" run "$T/f.json" --db "$T/shut/x.db" --out "$T/out" > /dev/null 2>&1 || { echo "setup run failed"; exit 1; }
 cp "$T/shut/x.db" "$T/open/x.db"
 chmod 444 "$T/shut/x.db" "$T/open/x.db"
 chmod 555 "$T/shut"   # a folder nobody may write: SQLite cannot make its -shm file there
@@ -41,6 +48,9 @@ for dir in shut open; do
   expect 0 "ro" -- status --db "$T/$dir/x.db"
   expect 0 "dt_factor" -- query --db "$T/$dir/x.db"
   expect 2 "cannot write database" -- run "$T/j.json" --db "$T/$dir/x.db" --out "$T/outs/$dir"
+  # A fit reads and answers, and says it could not store itself.
+  expect 0 "fit (not stored)" -- fit --db "$T/$dir/x.db" --job rofit --target max_relative_error=0.002
+  expect 0 "the fit is not stored" -- fit --db "$T/$dir/x.db" --job rofit --target max_relative_error=0.002
 done
 expect 2 "the file is read-only" -- run "$T/j.json" --db "$T/open/x.db" --out "$T/outs/open"
 expect 2 "is not writable" -- run "$T/j.json" --db "$T/shut/new.db" --out "$T/outs/new"
