@@ -8,9 +8,6 @@
 #include <H5Cpp.h>
 
 #include <algorithm>
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
 #include <sstream>
 #include <stdexcept>
 

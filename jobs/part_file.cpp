@@ -15,11 +15,9 @@ PartFile::~PartFile() {
 }
 
 void PartFile::commit(const std::string& what) {
-  if (std::rename(part_.c_str(), path_.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(part_.c_str());
-    throw std::runtime_error("cannot move the " + what + " into place at " + path_ + ": " + why);
-  }
+  // On failure the part stays uncommitted, and the destructor removes it.
+  if (std::rename(part_.c_str(), path_.c_str()) != 0)
+    throw std::runtime_error("cannot move the " + what + " into place at " + path_ + ": " + std::strerror(errno));
   done_ = true;
 }
 

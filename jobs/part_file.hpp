@@ -19,7 +19,8 @@ class PartFile {
   const std::string& path() const { return path_; }
   const std::string& part() const { return part_; }
   // Renames the part over the path. Throws std::runtime_error ("cannot move the
-  // `what` into place at PATH: why") and removes the part when that fails.
+  // `what` into place at PATH: why") when that fails; the part is then removed with
+  // the PartFile, as an uncommitted one.
   void commit(const std::string& what);
 
  private:

@@ -43,13 +43,23 @@ ContactParams frictionless(ContactParams law) {
 // own law's limit would prepare its column differently). Where dt is beyond the full
 // law's limit (possible only without rolling), the ratio to the target law's keeps
 // the frictionless step within its own.
-double frictionless_step_ratio(const World& frictionless_world, ContactParams full, double dt) {
+double frictionless_step_ratio(const World& frictionless_world, const ContactParams& target, double dt) {
   const double dtc = stability_limits(frictionless_world).governing().dt_critical;
-  const double dtc_target = stability_limits(frictionless_world, full).governing().dt_critical;
+  const double dtc_target = stability_limits(frictionless_world, target).governing().dt_critical;
+  ContactParams full = target;
   full.tan_theta = std::max(full.tan_theta, 1.0);  // any value > 0 counts the springs
   full.eta = std::max(full.eta, 1.0);
   const double dtc_full = stability_limits(frictionless_world, full).governing().dt_critical;
   return dtc / (dt <= dtc_full ? dtc_full : dtc_target);
+}
+
+// The step the settings give and the limit of `law`'s isolated contacts in the box of
+// six smooth walls, from the extremes of the diameter range.
+StepForecast forecast_for(const TriaxialConfig& c, const ContactParams& law) {
+  LimitInputs in;
+  in.law = law;
+  in.has_walls = true;  // six smooth walls
+  return forecast_step(in, c.material.d_min, c.material.d_max, c.grain_density(), c.dt, c.dt_factor);
 }
 
 std::string fmt(double v, int prec = 4) {
@@ -61,10 +71,7 @@ std::string fmt(double v, int prec = 4) {
 }  // namespace
 
 StepForecast TriaxialConfig::step_forecast() const {
-  LimitInputs in;
-  in.law = contact_params(material);  // the target law, the stiffest one the run uses
-  in.has_walls = true;                // six smooth walls
-  return forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
+  return forecast_for(*this, contact_params(material));  // the target law, the stiffest one the run uses
 }
 
 namespace {
@@ -117,10 +124,7 @@ void TriaxialConfig::validate() const {
     throw ConfigError("numerics.frictionless_dt_scale", "must be finite and >= 0 (0: the same margin to the critical step)");
   // A dt past its own limit is refused for itself (step_forecast), not blamed on the scale.
   if (packing == Packing::dense && frictionless_dt_scale > 0.0 && !step_forecast().exceeds()) {
-    LimitInputs in;
-    in.law = frictionless(contact_params(material));
-    in.has_walls = true;
-    const StepForecast f = forecast_step(in, material.d_min, material.d_max, grain_density(), dt, dt_factor);
+    const StepForecast f = forecast_for(*this, frictionless(contact_params(material)));
     if (f.dt * frictionless_dt_scale > f.dt_critical)
       throw ConfigError("numerics.frictionless_dt_scale",
                         "gives a frictionless step of " + fmt(f.dt * frictionless_dt_scale) +
