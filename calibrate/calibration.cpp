@@ -188,7 +188,12 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     throw JobError("--job", "the grids of jobs " + join(std::vector<std::string>(js.begin(), js.end())) +
                                 " do not overlap in (theta, eta)");
   }
-  cal.result = invert(cal.models, req.targets, box, req.options);
+  std::vector<PairCorrelation> correlations;
+  for (std::size_t k = 0; k < cal.surfaces.size(); ++k)
+    for (std::size_t l = k + 1; l < cal.surfaces.size(); ++l)
+      if (cal.surfaces[k].job == cal.surfaces[l].job)
+        correlations.push_back({k, l, replica_correlation(cal.surfaces[k], cal.surfaces[l])});
+  cal.result = invert(cal.models, req.targets, box, req.options, correlations);
   for (const auto& c : data_cuts) cal.result.warnings.push_back(c);
   if (cal.result.ok) {
     // One warning per set of gaps: metrics of one job share their failed tasks.

@@ -2,6 +2,7 @@
 
 #include "jobs/job_error.hpp"
 
+#include <Eigen/Dense>
 #include <nlopt.hpp>
 
 #include <algorithm>
@@ -53,18 +54,58 @@ double chi2_quantile(int dof, double z) {
   return k * std::pow(1 - a + z * std::sqrt(a), 3);
 }
 
-struct Objective {
+// The misfit r' C^-1 r of predictions against targets. C_kk = sigma_k^2; for two
+// metrics of one job C_kl = rho_kl cos_kl noise_k noise_l, where rho is the replica
+// correlation and cos_kl the cosine between the two surrogates' hat vectors at the
+// point (how far their noise comes from the same grid points alike). cos <= 1, and
+// C is positive definite wherever the matrix of rho is (Schur product theorem).
+// Without correlations: the plain sum of squares.
+struct Misfit {
   const std::vector<Model>* models;
-  const std::vector<double>* values;
-  const std::vector<double>* sigmas;
-  const Box* box;
-  double operator()(double th, double et) const {
-    double m = 0;
-    for (std::size_t k = 0; k < models->size(); ++k) {
-      const double r = ((*models)[k].surrogate(th, et) - (*values)[k]) / (*sigmas)[k];
-      m += r * r;
+  std::vector<double> values, sigma, noise;
+  std::vector<PairCorrelation> pairs;  // those counted (estimated, rho != 0)
+
+  // The effective noise correlation of pair `pc` at (th, et).
+  double effective_rho(const PairCorrelation& pc, double th, double et) const {
+    const Eigen::VectorXd hk = (*models)[pc.k].surrogate.hat(th, et), hl = (*models)[pc.l].surrogate.hat(th, et);
+    const double nk = hk.norm(), nl = hl.norm();
+    return nk > 0 && nl > 0 ? pc.c.rho * hk.dot(hl) / (nk * nl) : 0.0;
+  }
+  double operator()(double th, double et, const double* predicted) const {
+    const std::size_t K = values.size();
+    if (pairs.empty()) {
+      double m = 0;
+      for (std::size_t k = 0; k < K; ++k) {
+        const double r = (predicted[k] - values[k]) / sigma[k];
+        m += r * r;
+      }
+      return m;
     }
-    return m;
+    const auto n = static_cast<Eigen::Index>(K);
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(n, n);
+    Eigen::VectorXd r(n);
+    for (std::size_t k = 0; k < K; ++k) {
+      const auto i = static_cast<Eigen::Index>(k);
+      C(i, i) = sigma[k] * sigma[k];
+      r(i) = predicted[k] - values[k];
+    }
+    for (const auto& pc : pairs) {
+      const auto k = static_cast<Eigen::Index>(pc.k), l = static_cast<Eigen::Index>(pc.l);
+      C(k, l) = C(l, k) = effective_rho(pc, th, et) * noise[pc.k] * noise[pc.l];
+    }
+    return r.dot(C.llt().solve(r));
+  }
+};
+
+struct Objective {
+  const Misfit* misfit;
+  const Box* box;
+  mutable std::vector<double> predicted;  // scratch: NLopt evaluates one point at a time
+  double operator()(double th, double et) const {
+    const auto& models = *misfit->models;
+    predicted.resize(models.size());
+    for (std::size_t k = 0; k < models.size(); ++k) predicted[k] = models[k].surrogate(th, et);
+    return (*misfit)(th, et, predicted.data());
   }
   double unit(const std::vector<double>& x) const {
     return (*this)(box->theta_lo + x[0] * (box->theta_hi - box->theta_lo), box->eta_lo + x[1] * (box->eta_hi - box->eta_lo));
@@ -138,10 +179,41 @@ double surrogate_error(const Surrogate& s, double replica_se) {
   return std::sqrt(std::max(loo2 - se2, s.mean_leverage() * se2));
 }
 
+// Which correlations the misfit counts. Those of surrogates over different grid
+// points are not (their hat vectors do not pair up), and a set of three or more
+// whose matrix of rho is not positive definite (pairwise estimates from different
+// tasks need not be) is dropped, with a warning.
+std::vector<PairCorrelation> counted_pairs(const std::vector<Model>& models, FitResult& res) {
+  for (auto& pc : res.correlations)
+    if (pc.c.estimated && !models[pc.k].surrogate.same_points(models[pc.l].surrogate)) {
+      pc.c = {};
+      pc.c.reason = "the two metrics have data at different grid points";
+    }
+  const auto K = static_cast<Eigen::Index>(models.size());
+  Eigen::MatrixXd R = Eigen::MatrixXd::Identity(K, K);
+  std::vector<PairCorrelation> counted;
+  for (const auto& pc : res.correlations)
+    if (pc.c.estimated && pc.c.rho != 0.0) {
+      R(static_cast<Eigen::Index>(pc.k), static_cast<Eigen::Index>(pc.l)) = pc.c.rho;
+      R(static_cast<Eigen::Index>(pc.l), static_cast<Eigen::Index>(pc.k)) = pc.c.rho;
+      counted.push_back(pc);
+    }
+  if (Eigen::LLT<Eigen::MatrixXd>(R).info() != Eigen::Success) {
+    res.warnings.push_back("the replica correlations between the targets are not consistent with each other "
+                           "(their matrix is not positive definite): the targets are counted as independent");
+    for (auto& pc : res.correlations)
+      if (pc.c.estimated) pc.c = {}, pc.c.reason = "dropped: not consistent with the other pairs";
+    counted.clear();
+  }
+  return counted;
+}
+
 FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
-                 const FitOptions& opt) {
+                 const FitOptions& opt, const std::vector<PairCorrelation>& correlations) {
   if (models.size() != targets.size() || targets.empty())
     throw std::invalid_argument("invert: one model per target, at least one target");
+  for (const auto& pc : correlations)
+    if (!(pc.k < pc.l && pc.l < targets.size())) throw std::invalid_argument("invert: a correlation names no pair of targets");
   if (!(box.theta_hi > box.theta_lo) || !(box.eta_hi > box.eta_lo)) throw std::invalid_argument("invert: empty box");
   FitResult res;
   res.box = box;
@@ -153,7 +225,7 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
   // Each surrogate on the fine grid: its range over the box, and where it is reached.
   const std::size_t K = targets.size();
   std::vector<std::vector<double>> val(K, std::vector<double>(static_cast<std::size_t>(n * n)));
-  std::vector<double> values(K), sigmas(K);
+  std::vector<double> values(K);
   for (std::size_t k = 0; k < K; ++k) {
     TargetFit t;
     t.metric = targets[k].metric;
@@ -173,12 +245,12 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     t.sigma_given = std::isfinite(targets[k].sigma);
     t.lab_sigma = t.sigma_given ? targets[k].sigma : 0.0;
     t.surrogate_sigma = surrogate_error(models[k].surrogate, t.replica_se);
+    t.noise_sigma = std::sqrt(models[k].surrogate.mean_leverage()) * t.replica_se;
     // The target's own uncertainty and the surrogate's error are independent; floored
     // so a perfect fit of noise-free data cannot make the misfit infinitely sharp.
     t.sigma = std::sqrt(t.lab_sigma * t.lab_sigma + t.surrogate_sigma * t.surrogate_sigma);
     t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
     values[k] = t.target;
-    sigmas[k] = t.sigma;
     res.targets.push_back(t);
   }
 
@@ -194,17 +266,16 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                                 "); extend the grid beyond that bound");
   }
 
-  const Objective obj{&models, &values, &sigmas, &box};
-  std::vector<double> mis(static_cast<std::size_t>(n * n));
+  res.correlations = correlations;
+  Misfit misfit{&models, values, {}, {}, counted_pairs(models, res)};
+  for (const auto& t : res.targets) misfit.sigma.push_back(t.sigma), misfit.noise.push_back(t.noise_sigma);
+  const Objective obj{&misfit, &box, {}};
+  std::vector<double> mis(static_cast<std::size_t>(n * n)), pred(K);
   std::size_t best_cell = 0;
   for (std::size_t c = 0; c < mis.size(); ++c) {
-    double m = 0;
-    for (std::size_t k = 0; k < K; ++k) {
-      const double r = (val[k][c] - values[k]) / sigmas[k];
-      m += r * r;
-    }
-    mis[c] = m;
-    if (m < mis[best_cell]) best_cell = c;
+    for (std::size_t k = 0; k < K; ++k) pred[k] = val[k][c];
+    mis[c] = misfit(theta_at(static_cast<int>(c % n)), eta_at(static_cast<int>(c / n)), pred.data());
+    if (mis[c] < mis[best_cell]) best_cell = c;
   }
 
   // Global search over the unit square, then a local polish from the best start.
@@ -244,6 +315,8 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     res.targets[k].predicted = models[k].surrogate(res.theta, res.eta);
     res.targets[k].residual = res.targets[k].predicted - res.targets[k].target;
   }
+  for (auto& pc : res.correlations)
+    if (pc.c.estimated && !misfit.pairs.empty()) pc.at_best = misfit.effective_rho(pc, res.theta, res.eta);
 
   // The region: every fine-grid cell within delta of the minimum.
   Region& R = res.region;
@@ -376,8 +449,17 @@ nlohmann::json FitResult::to_json() const {
   j["targets"] = nlohmann::json::array();
   for (const auto& t : targets)
     j["targets"].push_back({{"metric", t.metric}, {"job", t.job}, {"target", num(t.target)}, {"sigma", num(t.sigma)},
-                            {"sigma_given", t.sigma_given}, {"lab_sigma", num(t.lab_sigma)}, {"surrogate_sigma", num(t.surrogate_sigma)}, {"predicted", num(t.predicted)}, {"residual", num(t.residual)},
+                            {"sigma_given", t.sigma_given}, {"lab_sigma", num(t.lab_sigma)}, {"surrogate_sigma", num(t.surrogate_sigma)}, {"noise_sigma", num(t.noise_sigma)}, {"predicted", num(t.predicted)}, {"residual", num(t.residual)},
                             {"loo_rms", num(t.loo_rms)}, {"replica_se", num(t.replica_se)}, {"range", {num(t.lo), num(t.hi)}}});
+  j["correlations"] = nlohmann::json::array();
+  for (const auto& pc : correlations)
+    j["correlations"].push_back({{"metrics", {targets[pc.k].metric, targets[pc.l].metric}},
+                                 {"rho", pc.c.rho},
+                                 {"dof", pc.c.dof},
+                                 {"points", pc.c.points},
+                                 {"estimated", pc.c.estimated},
+                                 {"at_best", num(pc.at_best)},
+                                 {"reason", pc.c.reason}});
   j["region"] = {{"level", "misfit - min <= 5.99 (95%, 2 parameters)"},
                  {"theta_deg", {num(region.theta_lo), num(region.theta_hi)}},
                  {"eta", {num(region.eta_lo), num(region.eta_hi)}},

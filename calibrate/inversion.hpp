@@ -3,6 +3,7 @@
 // match them best out, with the region consistent with the targets, warnings when
 // the targets do not pin the parameters down, and a refusal (not a boundary point)
 // when a target lies beyond what the grid reaches.
+#include "replica_correlation.hpp"
 #include "surrogate.hpp"
 
 #include <nlohmann/json.hpp>
@@ -38,11 +39,24 @@ struct TargetFit {
   std::string metric, job;
   double target = kNaN, sigma = kNaN;  // sigma^2 = lab_sigma^2 + surrogate_sigma^2 (floored)
   double lab_sigma = 0, surrogate_sigma = kNaN;
+  // The part of surrogate_sigma that is replica noise carried by the surface
+  // (sqrt(mean leverage) x replica se): the part shared, through the packings, with
+  // other metrics of the same job.
+  double noise_sigma = 0;
   bool sigma_given = false;
   double predicted = kNaN, residual = kNaN;  // residual = predicted - target
   double loo_rms = kNaN, replica_se = kNaN;
   double lo = kNaN, hi = kNaN;  // the surrogate's range over the box
   double theta_at_lo = kNaN, eta_at_lo = kNaN, theta_at_hi = kNaN, eta_at_hi = kNaN;
+};
+
+// The replica correlation between targets k < l (both metrics of one job).
+struct PairCorrelation {
+  std::size_t k = 0, l = 0;
+  ReplicaCorrelation c;
+  // The correlation of the two surrogates' noise at the best point: rho times the
+  // cosine between their hat vectors there (set by invert when counted).
+  double at_best = kNaN;
 };
 
 struct Region {
@@ -68,6 +82,10 @@ struct FitResult {
   bool ok = false;  // false: some target is unreachable (see `unreachable`); theta, eta are no answer
   double theta = kNaN, eta = kNaN, misfit = kNaN;
   std::vector<TargetFit> targets;
+  // Used in the misfit: r' C^-1 r with C_kk = sigma_k^2 and C_kl = rho_kl cos_kl
+  // noise_k noise_l, cos_kl the cosine between the two surrogates' hat vectors at
+  // the point. Empty, or every rho 0, and the misfit is the plain sum of squares.
+  std::vector<PairCorrelation> correlations;
   Region region;
   // Each parameter's own 95% interval (the other one free): the cells with misfit -
   // min <= 3.84 (chi-square, 1 dof), projected. Narrower than the joint region's extents.
@@ -77,9 +95,10 @@ struct FitResult {
   nlohmann::json to_json() const;
 };
 
-// models[k] is the surrogate for targets[k]. Throws std::invalid_argument when
-// the sizes disagree or the box is empty.
+// models[k] is the surrogate for targets[k]; `correlations` the replica correlations
+// between pairs of targets (none: independent). Throws std::invalid_argument when
+// the sizes disagree, the box is empty or a pair names no target.
 FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
-                 const FitOptions& options = {});
+                 const FitOptions& options = {}, const std::vector<PairCorrelation>& correlations = {});
 
 }  // namespace demcal::calibrate

@@ -246,6 +246,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     if (st == "done") {
       if (auto v = metric_value(spec, row.r.metrics)) {
         p.values.push_back(*v);
+        p.tasks.push_back(row.r.task.id);
         const std::string w = db::task_message(row.r.task).warning;
         if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
         if (uses_cv && w.find("not at critical state") != std::string::npos) ++rs.not_critical;

@@ -7,6 +7,7 @@
 #include "db/store.hpp"
 #include "jobs/query.hpp"
 
+#include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 struct GridPoint {
   double theta = 0, eta = 0;   // theta in degrees
   std::vector<double> values;  // one per replica with a value
+  std::vector<std::int64_t> tasks;  // the task each value came from (empty for synthetic surfaces)
   double mean = kNaN, sd = kNaN, se = kNaN;  // sd, se: NaN with fewer than 2 replicas
   int failed = 0, unfinished = 0, missing = 0;  // tasks without a value, by reason
   bool refine = false;         // added by `demcal fit --refine`, not part of the job's grid

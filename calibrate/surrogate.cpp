@@ -22,6 +22,7 @@ struct Trial {
   double loo_rms = INFINITY, loo_max = 0;
   double leverage = 1;  // mean diagonal of the hat matrix: effective parameters / points
   Eigen::VectorXd w, poly;
+  Eigen::MatrixXd coef_map;  // coefficients = coef_map * y
 };
 
 // Thin-plate spline with a linear polynomial; the smoothing term lambda / weight_i on
@@ -61,6 +62,7 @@ Trial thin_plate(const std::vector<double>& u, const std::vector<double>& v, con
   t.loo_max = mx;
   t.w = c.head(n);
   t.poly = c.tail(3);
+  t.coef_map = inv.leftCols(n);
   return t;
 }
 
@@ -96,6 +98,7 @@ Trial polynomial(const std::vector<double>& u, const std::vector<double>& v, con
   t.loo_max = mx;
   t.leverage = hsum / n;
   t.poly = beta;
+  t.coef_map = G * X.transpose() * wt.asDiagonal();  // beta = (X'WX)^-1 X'W y
   return t;
 }
 
@@ -126,6 +129,24 @@ double Surrogate::operator()(double theta, double eta) const {
   double s = 0;
   for (int k = 0; k < poly_terms(degree); ++k) s += poly_(k) * row[k];
   return s;
+}
+
+Eigen::VectorXd Surrogate::hat(double theta, double eta) const {
+  const double uu = u(theta), vv = v(eta);
+  if (kind_ == SurrogateKind::thin_plate) {
+    const auto n = static_cast<Eigen::Index>(u_.size());
+    Eigen::VectorXd basis(n + 3);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double du = uu - u_[static_cast<std::size_t>(i)], dv = vv - v_[static_cast<std::size_t>(i)];
+      basis(i) = tps(du * du + dv * dv);
+    }
+    basis.tail(3) << 1.0, uu, vv;
+    return coef_map_.transpose() * basis;
+  }
+  const int degree = kind_ == SurrogateKind::quadratic ? 2 : 3;
+  Eigen::VectorXd basis(poly_terms(degree));
+  monomials(uu, vv, degree, basis.data());
+  return coef_map_.transpose() * basis;
 }
 
 std::string Surrogate::describe() const {
@@ -189,6 +210,7 @@ Surrogate fit_surrogate(const std::vector<double>& theta, const std::vector<doub
   s.leverage_ = best.leverage;
   s.w_ = best.w;
   s.poly_ = best.poly;
+  s.coef_map_ = best.coef_map;
   return s;
 }
 

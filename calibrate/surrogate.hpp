@@ -33,6 +33,11 @@ class Surrogate {
   // share of a point mean's noise variance the surface carries at the points.
   double mean_leverage() const { return leverage_; }
   int points() const { return static_cast<int>(u_.size()); }
+  // The surface is linear in its points' means: s(theta, eta) = hat(theta, eta) . y.
+  // How much each point's noise reaches a value; two surrogates over the same points
+  // carry correlated noise in proportion to the cosine between their hat vectors.
+  Eigen::VectorXd hat(double theta, double eta) const;
+  bool same_points(const Surrogate& other) const { return u_ == other.u_ && v_ == other.v_; }
   const std::vector<SurrogateCandidate>& candidates() const { return candidates_; }
   std::string describe() const;  // e.g. "thin-plate spline (lambda 1e-3), LOO RMS 0.21 over 30 points"
 
@@ -48,6 +53,7 @@ class Surrogate {
   Box box_;                        // normalisation: the box maps to the unit square
   std::vector<double> u_, v_;      // centres (normalised)
   Eigen::VectorXd w_, poly_;       // spline weights, polynomial coefficients
+  Eigen::MatrixXd coef_map_;       // (w_, poly_) = coef_map_ * y for the thin-plate spline, poly_ = coef_map_ * y otherwise
   std::vector<SurrogateCandidate> candidates_;
 };
 

@@ -39,6 +39,15 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
         << (m.replica_se > 0 ? g(m.replica_se, 3) : std::string("unknown (one replica a point: LOO alone measures the noise)"))
         << "\n";
   }
+  for (const auto& pc : r.correlations) {
+    out << "  replica correlation " << r.targets[pc.k].metric << " ~ " << r.targets[pc.l].metric << ": ";
+    if (pc.c.estimated)
+      out << g(pc.c.rho, 2) << " (" << pc.c.dof << " dof over " << pc.c.points << " points), counted in the misfit"
+          << (std::isfinite(pc.at_best) ? " (" + g(pc.at_best, 2) + " between the two surrogates at the best point)" : "")
+          << "\n";
+    else
+      out << "not estimated (" << pc.c.reason << "): counted as 0\n";
+  }
   if (r.ok) {
     out << "best: theta = " << g(r.theta) << " deg, eta = " << g(r.eta) << " (misfit " << g(r.misfit, 3) << ")\n";
   } else {

@@ -10,6 +10,7 @@
 #include <functional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace demcal::test {
@@ -56,6 +57,38 @@ inline calibrate::ResponseSurface synthetic_surface(const Fn& f, double noise, i
   return rs;
 }
 
+// Two metrics of one job whose replica noise is correlated by rho, as phi_peak and
+// phi_cv from the same packings are; each value carries its task id.
+inline std::pair<calibrate::ResponseSurface, calibrate::ResponseSurface> synthetic_pair(
+    const Fn& fa, const Fn& fb, double noise, double rho, int replicas, std::mt19937_64& rng) {
+  std::normal_distribution<double> n01(0.0, 1.0);
+  calibrate::ResponseSurface a, b;
+  a.job = b.job = "synthetic";
+  a.metric = a.label = "phi_peak";
+  b.metric = b.label = "phi_cv";
+  a.thetas = b.thetas = thetas();
+  a.etas = b.etas = etas();
+  std::int64_t task = 0;
+  for (double th : a.thetas)
+    for (double et : a.etas) {
+      calibrate::GridPoint pa, pb;
+      pa.theta = pb.theta = th;
+      pa.eta = pb.eta = et;
+      for (int r = 0; r < replicas; ++r) {
+        const double z1 = n01(rng), z2 = n01(rng);
+        pa.values.push_back(fa(th, et) + noise * z1);
+        pb.values.push_back(fb(th, et) + noise * (rho * z1 + std::sqrt(1 - rho * rho) * z2));
+        pa.tasks.push_back(++task);
+        pb.tasks.push_back(task);
+      }
+      a.points.push_back(pa);
+      b.points.push_back(pb);
+    }
+  a.summarise();
+  b.summarise();
+  return {a, b};
+}
+
 // A triaxial-like job stored through the store API: one task per grid point and
 // replica, finished with phi_peak_deg, phi_cv_deg and q_peak_pa, except `failed`
 // points (failed tasks) and `pending` points (never run).
@@ -65,7 +98,7 @@ struct FakePoint {
 inline void store_fake_job(db::Store& store, const std::string& name, const std::vector<double>& ths,
                            const std::vector<double>& ets, int replicas, double noise, std::uint64_t seed,
                            const std::vector<FakePoint>& failed = {}, const std::vector<FakePoint>& pending = {},
-                           double confining_kpa = 100) {
+                           double confining_kpa = 100, double rho = 0) {
   std::vector<db::NewTask> tasks;
   for (double th : ths)
     for (double et : ets)
@@ -93,7 +126,10 @@ inline void store_fake_job(db::Store& store, const std::string& name, const std:
       o.error = "synthetic failure";
     } else {
       o.status = "done";
-      const double pk = phi_peak_fn(th, et) + noise * n01(rng), cv = phi_cv_fn(th, et) + noise * n01(rng);
+      // phi_cv's noise correlated with phi_peak's by rho (one packing gives both).
+      const double z1 = n01(rng), z2 = n01(rng);
+      const double pk = phi_peak_fn(th, et) + noise * z1;
+      const double cv = phi_cv_fn(th, et) + noise * (rho * z1 + std::sqrt(1 - rho * rho) * z2);
       const double s = std::sin(pk * M_PI / 180);
       const double q = confining_kpa * 1000 * (2 * s / (1 - s));  // sigma1 - sigma3 at phi_peak, no cohesion
       o.metrics = {{"phi_peak_deg", pk}, {"phi_cv_deg", cv}, {"q_peak_pa", q}};

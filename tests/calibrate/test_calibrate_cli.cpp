@@ -125,6 +125,35 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   EXPECT_NEAR(t0["sigma"].get<double>(), std::sqrt(0.25 + ss * ss), 1e-12);
 }
 
+TEST(CalibrateCli, FitCountsTheReplicaCorrelationOfOneJobsMetrics) {
+  TempDir d;
+  {
+    db::Store s(d.file("demcal.db"));
+    store_fake_job(s, "grid", kTh, kEt, 3, 0.3, 7, {}, {}, 100, 0.7);
+  }
+  const double th = 28, et = 0.22;
+  const std::string pk = "phi_peak=" + std::to_string(phi_peak_fn(th, et)), cv = "phi_cv=" + std::to_string(phi_cv_fn(th, et));
+  auto r = run_demcal({"fit", "--target", pk, "--target", cv}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("replica correlation phi_peak ~ phi_cv: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("(72 dof over 36 points), counted in the misfit"), std::string::npos) << r.out;
+  r = run_demcal({"fit", "--target", pk, "--target", cv, "--format", "json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j["correlations"].size(), 1u);
+  EXPECT_NEAR(j["correlations"][0]["rho"].get<double>(), 0.7, 0.2);
+  EXPECT_TRUE(j["correlations"][0]["estimated"].get<bool>());
+  // One replica a point: nothing to estimate, and the fit says so.
+  TempDir one;
+  {
+    db::Store s(one.file("demcal.db"));
+    store_fake_job(s, "grid", kTh, kEt, 1, 0.3, 7, {}, {}, 100, 0.7);
+  }
+  r = run_demcal({"fit", "--target", pk, "--target", cv}, one.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("not estimated (0 dof from paired replicas, fewer than 5): counted as 0"), std::string::npos) << r.out;
+}
+
 TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
   TempDir d;
   const std::string db = make_db(d, /*with_holes=*/false);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <set>
 
 namespace demcal::test {
 namespace {
@@ -57,6 +58,32 @@ TEST(Surrogate, NoisyDataAreSmoothedAndTheLooErrorCoversTheTruth) {
   EXPECT_NEAR(rs.pooled_sd, 0.5, 0.2);
   // Smoothing chosen: not an interpolant of the noise.
   EXPECT_FALSE(s.kind() == calibrate::SurrogateKind::thin_plate && s.lambda() == 0.0);
+}
+
+TEST(Surrogate, IsLinearInItsPointsMeansThroughTheHatVector) {
+  // s(x) = hat(x) . y for every kind the fit picks: the spline (interpolating and
+  // smoothing) and the polynomials. The inversion's noise correlations rest on it.
+  std::set<std::string> kinds;
+  const std::vector<std::pair<Fn, double>> cases = {
+      {phi_peak_fn, 0.0}, {phi_peak_fn, 0.5}, {[](double th, double et) { return 20 + 0.3 * th + 5 * et - 2 * et * th / 40; }, 0.05},
+      {[](double th, double et) { return 1e-4 * th * th * th + et * et * et; }, 0.0}, {phi_cv_fn, 0.0}, {phi_cv_fn, 0.3},
+      {[](double th, double et) { return std::abs(th - 27.0) + 10 * std::abs(et - 0.25); }, 0.0}};
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> ut(15, 40), ue(0, 0.5);
+  for (const auto& [f, noise] : cases) {
+    const auto rs = synthetic_surface(f, noise, 2, rng);
+    const auto s = calibrate::fit_surrogate(rs);
+    kinds.insert(calibrate::kind_name(s.kind()) + (s.lambda() > 0 ? " smoothed" : ""));
+    Eigen::VectorXd y(static_cast<Eigen::Index>(rs.points.size()));
+    for (std::size_t i = 0; i < rs.points.size(); ++i) y(static_cast<Eigen::Index>(i)) = rs.points[i].mean;
+    for (int i = 0; i < 50; ++i) {
+      const double th = ut(rng), et = ue(rng);
+      EXPECT_NEAR(s.hat(th, et).dot(y), s(th, et), 1e-9 * (1 + std::abs(s(th, et)))) << s.describe();
+    }
+    EXPECT_TRUE(s.same_points(s));
+  }
+  for (const auto& k : kinds) std::printf("hat vector checked for: %s\n", k.c_str());
+  EXPECT_GE(kinds.size(), 3u);
 }
 
 TEST(Surrogate, RefusesPointsThatCannotCarryASurface) {
