@@ -26,8 +26,8 @@ void add_map(CLI::App& app, int& exit_code) {
   cmd->add_option("--metric", a->metric, "phi_peak, phi_cv, phi_diff, repose, or a stored metric")->required();
   cmd->add_option("--job", a->job, "job to draw (default: the job storing the metric)");
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
-  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
-  cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)");
+  cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
+  cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)")->check(kPlainPath);
   cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
@@ -76,7 +76,7 @@ void add_envelope(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<Args>();
   cmd->add_option("--job", a->job, "triaxial job spanning several confining_kpa (default: the only job)");
   cmd->add_option("--where", a->where, "KEY=VALUE pinning another parameter; repeatable");
-  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
       std::vector<jobs::Where> where;

@@ -36,8 +36,8 @@ void add_merge(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "merge", "Join databases of sharded runs (demcal run --shard i/N) into one: one result per task key");
   auto a = std::make_shared<MergeArgs>();
-  cmd->add_option("PARTS", a->parts, "databases to merge (e.g. part-*.db)")->required();
-  cmd->add_option("--into", a->into, "destination database (created if missing)")->capture_default_str();
+  cmd->add_option("PARTS", a->parts, "databases to merge (e.g. part-*.db)")->required()->check(kDbPath);
+  cmd->add_option("--into", a->into, "destination database (created if missing)")->check(kDbPath)->capture_default_str();
   cmd->footer(
       "Identical results already in the destination are left alone, so merging a part twice changes nothing. "
       "The same task key with different metrics is a conflict: reported, the destination keeps its result, exit "

@@ -20,11 +20,11 @@ void add_plot(CLI::App& app, int& exit_code) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("TASK", a->task, "task id (the first column of demcal query)")->required();
-  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--series", a->series, "series name, e.g. energy")->required();
   cmd->add_option("--x", a->x, "column for the x axis, e.g. step")->required();
   cmd->add_option("--y", a->y, "columns to draw (comma separated), e.g. total,kinetic")->required()->delimiter(',');
-  cmd->add_option("--out", a->out, "output file, .png or .svg")->required();
+  cmd->add_option("--out", a->out, "output file, .png or .svg")->required()->check(kPlainPath);
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
       require_writable_file("--out", a->out);

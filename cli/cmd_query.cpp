@@ -14,7 +14,7 @@ void add_query(CLI::App& app, int& exit_code) {
     std::vector<std::string> where, metrics;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--job", a->job, "only this job's tasks");
   cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable");
   cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated), or all; default: every metric in CSV and JSON, the scene's headline metrics in a table")->delimiter(',');

@@ -1,5 +1,6 @@
 #include "common.hpp"
 
+#include "db/schema.hpp"
 #include "db/store.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/query.hpp"
@@ -38,14 +39,20 @@ int run(const RunArgs& a) {
   if (a.db.empty()) throw jobs::JobError("--db", "empty path");
   jobs::RunOptions opt;
   opt.out_dir = a.out.empty() ? default_out_dir(a.db) : a.out;
-  require_writable_dir(a.out.empty() ? "--db" : "--out", opt.out_dir);  // before the database is written
+  opt.out_flag = a.out.empty() ? "--db" : "--out";
+  opt.shard = shard;
+  require_writable_dir(opt.out_flag, opt.out_dir);  // before the database is written
+  // The database checked (read-only) and its folder found, then the output folder
+  // made, then the database opened: a refusal of either writes nothing.
+  db::check_file(a.db);
+  db::check_writable(a.db);
+  jobs::make_task_output_dir(job, opt);
   db::Store store(a.db);
   opt.workers = a.workers;
   opt.retry_failed = a.retry_failed;
   opt.requeue_running = a.requeue_running;
   opt.terminal = isatty(STDERR_FILENO) != 0;
   opt.log = &std::cerr;
-  opt.shard = shard;
 #ifdef DEMCAL_HAVE_MPI
   const jobs::RunSummary s =
       a.mpi ? jobs::mpi::run_job_root(store, job, opt, jobs::mpi::MpiOptions{a.mpi_timeout}) : jobs::run_job(store, job, opt);
@@ -77,10 +84,10 @@ int run(const RunArgs& a) {
 void add_run(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("run", "Run a job's tasks (resumes: finished tasks are reused)");
   auto a = std::make_shared<RunArgs>();
-  cmd->add_option("JOB", a->job, "job file (JSON)")->required();
-  cmd->add_option("--db", a->db, "SQLite database")->capture_default_str();
+  cmd->add_option("JOB", a->job, "job file (JSON)")->required()->check(kPlainPath);
+  cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->check(CLI::Range(1, 4096));
-  cmd->add_option("--out", a->out, "output directory (default: demcal-out/ next to the database)");
+  cmd->add_option("--out", a->out, "output directory (default: demcal-out/ next to the database)")->check(kPlainPath);
   cmd->add_flag("--retry-failed", a->retry_failed, "run the job's failed tasks again");
   cmd->add_flag("--requeue-running", a->requeue_running,
                 "put the job's running tasks back in the queue first: their runner is gone (a runner on another "
@@ -94,6 +101,7 @@ void add_run(CLI::App& app, int& exit_code) {
   cmd->add_option("--mpi-timeout", a->mpi_timeout,
                   "with --mpi: seconds without a heartbeat after which a worker rank counts as lost")
       ->capture_default_str()
+      ->check(kFinite)
       ->check(CLI::Range(0.1, 86400.0));
   cmd->callback([a, shard_opt, &exit_code] {
     a->shard_given = shard_opt->count() > 0;

@@ -122,6 +122,8 @@ int slurm(SlurmArgs a) {
                              " has a blank in its path, which a #SBATCH --output line cannot carry; choose another");
   if (!a.demcal.empty() && !fs::exists(a.demcal))
     throw jobs::JobError("--demcal", "no such file: " + fs::absolute(a.demcal).string());
+  if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))
+    throw jobs::JobError("--demcal", fs::absolute(a.demcal).string() + " is not a file (give the demcal executable)");
   const std::string text = script(a, job);
   {
     std::ofstream f(a.out, std::ios::trunc);
@@ -142,7 +144,7 @@ int slurm(SlurmArgs a) {
 void add_slurm(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("slurm", "Write a SLURM array batch script: one shard per array element, then a merge");
   auto a = std::make_shared<SlurmArgs>();
-  cmd->add_option("JOB", a->job, "job file (JSON)")->required();
+  cmd->add_option("JOB", a->job, "job file (JSON)")->required()->check(kPlainPath);
   cmd->add_option("--array", a->array, "number of shards (array elements 1..N)")
       ->required()
       ->check(CLI::Range(1, jobs::kMaxShards));
@@ -151,10 +153,10 @@ void add_slurm(CLI::App& app, int& exit_code) {
   cmd->add_option("--cpus-per-task", a->cpus, "cores per shard (its local --workers)")
       ->capture_default_str()
       ->check(CLI::Range(1, 4096));
-  cmd->add_option("--db", a->db, "the merged database")->capture_default_str();
-  cmd->add_option("--parts", a->parts, "folder for the shards' databases and logs (default: parts/ next to --db)");
-  cmd->add_option("--demcal", a->demcal, "demcal executable on the cluster (default: this one)");
-  cmd->add_option("--out", a->out, "script to write (default: demcal-<job>.slurm.sh)");
+  cmd->add_option("--db", a->db, "the merged database")->check(kDbPath)->capture_default_str();
+  cmd->add_option("--parts", a->parts, "folder for the shards' databases and logs (default: parts/ next to --db)")->check(kPlainPath);
+  cmd->add_option("--demcal", a->demcal, "demcal executable on the cluster (default: this one)")->check(kPlainPath);
+  cmd->add_option("--out", a->out, "script to write (default: demcal-<job>.slurm.sh)")->check(kPlainPath);
   cmd->callback([a, &exit_code] { exit_code = guarded(a->job, [&] { return slurm(*a); }); });
 }
 

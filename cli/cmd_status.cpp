@@ -82,7 +82,7 @@ void add_status(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("status", "Task counts per status, per job, the reason of up to three failed tasks per job, and how many finished tasks carry warnings");
   auto db = std::make_shared<std::string>("demcal.db");
   auto job = std::make_shared<std::string>();
-  cmd->add_option("--db", *db, "SQLite database")->capture_default_str();
+  cmd->add_option("--db", *db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--job", *job, "only this job");
   cmd->callback([db, job, &exit_code] {
     exit_code = guarded("", [&] {

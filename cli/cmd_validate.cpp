@@ -9,7 +9,7 @@ namespace demcal::cli {
 void add_validate(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("validate", "Check a job file; print its task count and first task's parameters");
   auto file = std::make_shared<std::string>();
-  cmd->add_option("JOB", *file, "job file (JSON)")->required();
+  cmd->add_option("JOB", *file, "job file (JSON)")->required()->check(kPlainPath);
   cmd->callback([file, &exit_code] {
     exit_code = guarded(*file, [&] {
       const jobs::Job job = jobs::load_job_file(*file);

@@ -3,6 +3,7 @@
 #include "db/sqlite.hpp"
 #include "jobs/job_error.hpp"
 
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <unistd.h>
@@ -26,6 +27,53 @@ int guarded(const std::string& context, const std::function<int()>& body) {
     return kRuntime;
   }
 }
+
+namespace {
+
+bool valid_utf8(const std::string& s) {
+  std::size_t i = 0;
+  while (i < s.size()) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    const int len = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xE ? 3 : (c >> 3) == 0x1E ? 4 : 0;
+    if (len == 0 || i + static_cast<std::size_t>(len) > s.size()) return false;
+    for (int k = 1; k < len; ++k)
+      if ((static_cast<unsigned char>(s[i + static_cast<std::size_t>(k)]) >> 6) != 0x2) return false;
+    i += static_cast<std::size_t>(len);
+  }
+  return true;
+}
+
+std::string plain_path_error(const std::string& path) {
+  if (path.empty()) return "empty path";
+  for (const char ch : path)
+    if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f)
+      return "the path contains a control character (newline, tab, ...): give a plain file name";
+  if (!valid_utf8(path)) return "the path is not valid UTF-8";
+  return "";
+}
+
+}  // namespace
+
+const CLI::Validator kPlainPath(plain_path_error, "PATH", "plain path");
+
+const CLI::Validator kDbPath(
+    [](std::string& path) {
+      if (std::string e = plain_path_error(path); !e.empty()) return e;
+      return db::sqlite_name_refusal(path);
+    },
+    "FILE", "database file");
+
+const CLI::Validator kFinite(
+    [](std::string& text) {
+      try {
+        std::size_t used = 0;
+        const double v = std::stod(text, &used);
+        if (used == text.size() && std::isfinite(v)) return std::string();
+      } catch (const std::exception&) {
+      }
+      return "must be a finite number, got \"" + text + "\"";
+    },
+    "NUMBER", "finite number");
 
 std::string default_out_dir(const std::string& db_path) {
   const auto parent = std::filesystem::absolute(db_path).parent_path();

@@ -23,6 +23,16 @@ void require_db(const std::string& db_path);
 // writable folder, or when the file's folder does not exist or is not writable.
 void require_writable_dir(const std::string& flag, const std::string& dir);
 void require_writable_file(const std::string& flag, const std::string& file);
+// Option checks for paths, so that CLI11 names the option and exits 2:
+// kPlainPath refuses an empty path, control characters (a newline in a path would
+// end a line of the gnuplot and batch scripts demcal writes) and bytes that are not
+// UTF-8 (the path goes into JSON records, which must be UTF-8); kDbPath also
+// refuses the names SQLite would not read as a file (":memory:", "file:...").
+extern const CLI::Validator kPlainPath;
+extern const CLI::Validator kDbPath;
+// A finite number: CLI11's ranges let NaN through.
+extern const CLI::Validator kFinite;
+
 // A job's notes (legal but easy to miss) on stderr, one line each.
 void print_notes(const std::string& job_file, const std::vector<std::string>& notes);
 

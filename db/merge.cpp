@@ -175,7 +175,8 @@ class Merger {
       if (f.step()) {
         if (f.text(1) != spec)
           throw DbError(path_ + ": job \"" + name + "\" was run from a different job file (spec) than the job of that name in " +
-                        into_ + "; nothing merged");
+                            into_ + "; nothing merged",
+                        true);
         jobs_[part_id] = {f.int64(0), name};  // the destination's row stays as it is
       } else {
         out_.prepare("INSERT INTO jobs(name, spec_json, created_at, updated_at) VALUES(?, ?, ?, ?)")
@@ -318,14 +319,7 @@ class Merger {
 
 }  // namespace
 
-bool is_timing_metric(const std::string& name) {
-  return name == "wall_s" || name.rfind("wall_s_", 0) == 0 || name == "particle_steps_per_s";
-}
-
-MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts) {
-  // Every part first: a bad one stops the merge before the destination is touched.
-  for (const auto& p : parts) check_part(p, into);
-  check_file(into);
+static MergeReport merge_into(const std::string& into, const std::vector<std::string>& parts) {
   Connection out(into, /*read_only=*/false);
   out.exec("PRAGMA journal_mode = WAL");
   out.exec("PRAGMA synchronous = NORMAL");
@@ -337,6 +331,29 @@ MergeReport merge_databases(const std::string& into, const std::vector<std::stri
   for (const auto& p : parts) m.merge(p);
   t.commit();
   return report;
+}
+
+bool is_timing_metric(const std::string& name) {
+  return name == "wall_s" || name.rfind("wall_s_", 0) == 0 || name == "particle_steps_per_s";
+}
+
+MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts) {
+  // Every part first: a bad one stops the merge before the destination is touched.
+  for (const auto& p : parts) check_part(p, into);
+  check_file(into);
+  // A merge that fails (two parts ran different job files under one name) rolls
+  // back; a destination it created is removed too, so nothing is left half-made.
+  const bool created = !std::filesystem::exists(into);
+  try {
+    return merge_into(into, parts);
+  } catch (...) {
+    if (created)
+      for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+        std::error_code ec;
+        std::filesystem::remove(into + suffix, ec);
+      }
+    throw;
+  }
 }
 
 }  // namespace demcal::db

@@ -87,13 +87,43 @@ void check_header(const std::string& path) {
     throw DbError(path + " is not a SQLite database (and was left untouched)", true);
 }
 
+// The tables each schema version has. A demcal file that lacks one (a table
+// dropped by hand, a version reset) would fail half-way through a run, after
+// writing to it: refused up front instead.
+void require_tables(Connection& c, const std::string& path, int version, int tables) {
+  if (version == 0) {
+    if (tables > 0)
+      throw DbError(path + " is a damaged demcal database: schema version 0, yet it holds tables (left untouched)", true);
+    return;
+  }
+  static const char* const kTables[][7] = {
+      {"jobs", "tasks", "job_tasks", "metrics", "artifacts", "fits", nullptr},  // version 1
+      {"jobs", "tasks", "job_tasks", "metrics", "artifacts", "fits", "runners"},  // version 2
+  };
+  static_assert(sizeof(kTables) / sizeof(kTables[0]) == kSchemaVersion, "one table list per version");
+  Statement q = c.prepare("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?");
+  for (const char* name : kTables[version - 1]) {
+    if (!name) continue;
+    q.reset();
+    q.bind(1, std::string(name));
+    if (!q.step() || q.int64(0) == 0)
+      throw DbError(path + " is a damaged demcal database: table " + name + " is missing (schema version " +
+                        std::to_string(version) + "; left untouched)",
+                    true);
+  }
+}
+
 }  // namespace
 
 void check_file(const std::string& path) {
+  if (const std::string why = sqlite_name_refusal(path); !why.empty()) throw DbError("database " + why, true);
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
     throw DbError(path + " is a folder, not a database file (give a file in it, e.g. " +
                   (std::filesystem::path(path) / "demcal.db").string() + ")", true);
+  // /dev/null reads as empty, and SQLite cannot keep a database in a device or pipe.
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
+    throw DbError(path + " is not a regular file (a device, pipe or socket): give a database file", true);
   if (file_is_empty_or_missing(path)) return;
   check_header(path);
   Connection c(path, /*read_only=*/true);
@@ -114,6 +144,7 @@ void check_file(const std::string& path) {
     throw DbError(path + " has schema version " + std::to_string(version) + ", newer than this demcal supports (" +
                       std::to_string(kSchemaVersion) + "); upgrade demcal",
                   true);
+  require_tables(c, path, version, tables);
 }
 
 void migrate(Connection& c) {

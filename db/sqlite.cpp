@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <strings.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -27,6 +28,15 @@ std::string uri_of(const std::string& path, const char* query) {
 }
 }  // namespace
 
+std::string sqlite_name_refusal(const std::string& path) {
+  if (path.empty()) return "empty database path";
+  if (path == ":memory:") return "\":memory:\" is a database in memory: every result would be lost; give a file";
+  if (path.size() >= 5 && ::strncasecmp(path.c_str(), "file:", 5) == 0)
+    return "\"" + path + "\" would be read by SQLite as a URI, not as a file name (write ./" + path +
+           " for a file of that name)";
+  return "";
+}
+
 // Why demcal may not write `path` (empty when it may): the file, or the folder that
 // must take SQLite's -wal and -shm files beside it.
 std::string write_refusal(const std::string& path) {
@@ -37,7 +47,16 @@ std::string write_refusal(const std::string& path) {
   return "";
 }
 
+void check_writable(const std::string& path) {
+  const auto dir = std::filesystem::absolute(path).parent_path();
+  if (!std::filesystem::is_directory(dir))
+    throw DbError("cannot open database " + path + ": directory " + dir.string() + " does not exist", true);
+  if (const std::string why = write_refusal(path); !why.empty())
+    throw DbError("cannot write database " + path + ": " + why, true);
+}
+
 Connection::Connection(const std::string& path, bool read_only) : path_(path) {
+  if (const std::string why = sqlite_name_refusal(path); !why.empty()) throw DbError("database " + why, true);
   bool open = false;
   if (read_only) {
     // Readers open the file read-write (never creating it) with writes refused
@@ -53,8 +72,8 @@ Connection::Connection(const std::string& path, bool read_only) : path_(path) {
       db_ = nullptr;
     }
     if (!open && std::filesystem::is_regular_file(path)) open = open_read_only(path);
-  } else if (const std::string why = write_refusal(path); !why.empty()) {
-    throw DbError("cannot write database " + path + ": " + why, true);
+  } else {
+    check_writable(path);
   }
   if (!open) {
     const int flags = read_only ? SQLITE_OPEN_READONLY : (SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);

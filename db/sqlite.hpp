@@ -24,6 +24,16 @@ class DbError : public std::runtime_error {
 
 class Statement;
 
+// Why SQLite would not read `path` as the file of that name (empty when it would):
+// "" and ":memory:" are databases in memory (every result lost at exit), and a name
+// starting with "file:" is a URI (this SQLite is built to read them), whose file is
+// not the one the checks looked at. Connection refuses such names.
+std::string sqlite_name_refusal(const std::string& path);
+
+// Throws DbError(bad input) when the database at `path` could not be written or
+// created: its folder missing, or write_refusal. Creates nothing.
+void check_writable(const std::string& path);
+
 // Why demcal may not write the database at `path` (the file, or its folder, which
 // must take SQLite's -wal and -shm files); empty when it may.
 std::string write_refusal(const std::string& path);

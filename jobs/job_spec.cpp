@@ -7,6 +7,7 @@
 #include "text_groups.hpp"
 #include "validate.hpp"
 
+#include <cmath>
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -143,6 +144,13 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
   int shown = 0, more = 0;
   for (const auto& t : job.tasks) {
     const engine::StepForecast f = scene.forecast(t.params);
+    // kn of 5e-324 passes "> 0" and gives an infinite step: the engine would refuse
+    // every task naming dt, which the job may not even set.
+    if (!(std::isfinite(f.dt) && f.dt > 0.0))
+      throw JobError(t.params.contains("dt") ? "dt" : "material.kn",
+                     "task #" + std::to_string(t.index) + ": the time step works out to " + std::to_string(f.dt) +
+                         " s, not a finite positive number (dt_factor x sqrt(m_min / kn), with the scene's stiffness "
+                         "scale): check material.kn, the stiffness scale, the diameters and the density");
     if (!f.exceeds()) continue;
     if (shown == 5) {
       ++more;
@@ -238,10 +246,16 @@ Job load_job_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::error_code ec;
   if (!in || std::filesystem::is_directory(path, ec)) throw unreadable(path);
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Read at most the cap and one byte more: /dev/zero or a mistyped data file must
+  // not be read until memory runs out. Pipes (process substitution) stay allowed.
+  std::string text(kMaxJobFileBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
   if (in.bad()) throw unreadable(path);
-  return parse_job(text.str(), path);
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxJobFileBytes)
+    throw JobError("", path + ": larger than " + std::to_string(kMaxJobFileBytes >> 20) +
+                           " MiB, which no job file is (a grid is a list of values, not the values of every task)");
+  return parse_job(text, path);
 }
 
 }  // namespace demcal::jobs

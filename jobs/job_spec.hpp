@@ -4,6 +4,7 @@
 // so an invalid job is rejected before anything is written.
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -33,8 +34,12 @@ struct Job {
   std::vector<std::string> notes;  // what the file says that is legal but easy to miss
 };
 
+// A job file is a few kilobytes; anything past this is not one.
+constexpr std::size_t kMaxJobFileBytes = std::size_t{16} << 20;
+
 // Throw JobError naming the JSON path (or "" for whole-file problems such as a
-// missing file or malformed JSON, with line and column).
+// missing file, one larger than kMaxJobFileBytes, or malformed JSON, with line and
+// column).
 Job load_job_file(const std::string& path);
 Job parse_job(const std::string& text, const std::string& source);
 

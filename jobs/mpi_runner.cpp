@@ -179,6 +179,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
   StopSignalGuard guard;
   const std::string token = runner_token();
+  const std::filesystem::path dir = make_task_output_dir(job, options);
   const std::int64_t job_id = record_job(store, job, options.shard, log);
   Heartbeat heartbeat(store, token);  // before the re-queue of dead runners' tasks
   if (options.requeue_running)
@@ -187,8 +188,6 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (options.retry_failed)
     if (int n = store.reset_failed(job_id)) log << "retrying " << n << " failed task(s)\n";
-  const std::filesystem::path dir = task_output_dir(job, options);
-  std::filesystem::create_directories(dir);
   std::deque<db::TaskRow> queue;
   for (auto& row : store.tasks(job.name))
     if (row.status == "pending" && options.shard.contains(static_cast<std::size_t>(row.index)))

@@ -15,7 +15,9 @@
 namespace demcal::jobs {
 namespace {
 
-bool numbers_equal(double a, double b) { return a == b || std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)); }
+bool numbers_equal(double a, double b) {
+  return a == b || (std::isfinite(a) && std::isfinite(b) && std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)));
+}
 
 // The whole of `text` as a number, or false.
 bool parse_number(const std::string& text, double& d) {
@@ -257,6 +259,10 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
   }
   if (numeric && !parse_number(w.value, d))
     throw JobError("--where", w.key + " is a number in every task; got \"" + w.value + "\"");
+  // A stored parameter is always finite: inf would match everything (|a - inf| <=
+  // 1e-12 inf) and nan nothing.
+  if (numeric && !std::isfinite(d))
+    throw JobError("--where", w.key + " is a finite number in every task; got \"" + w.value + "\"");
 }
 
 }  // namespace

@@ -1,4 +1,5 @@
 #include "runner.hpp"
+#include "job_error.hpp"
 
 #include "liveness.hpp"
 #include "physics_version.hpp"
@@ -92,6 +93,7 @@ class Runner {
 };
 
 void Runner::prepare() {
+  make_task_output_dir(job_, opt_);
   const std::int64_t job_id = record_job(store_, job_, opt_.shard, *opt_.log);
   if (opt_.shard.active())
     *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
@@ -127,7 +129,6 @@ void Runner::prepare() {
   } else {
     threads_ = 1;
   }
-  std::filesystem::create_directories(dir_);
   if (!queue_.empty()) *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
 }
 
@@ -335,6 +336,16 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
           << kept << ". Give the job another name to keep both\n";
   }
   return id;
+}
+
+std::string make_task_output_dir(const Job& job, const RunOptions& options) {
+  const std::string dir = task_output_dir(job, options);
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec || !std::filesystem::is_directory(dir))
+    throw JobError(options.out_flag, "cannot create the output folder " + dir + ": " +
+                                         (ec ? ec.message() : std::string("a file of that name is in the way")));
+  return dir;
 }
 
 std::string task_output_dir(const Job& job, const RunOptions& options) {

@@ -19,6 +19,7 @@ struct RunOptions {
   bool terminal = false;     // draw a progress bar
   std::ostream* log = nullptr;  // progress and state changes (stderr)
   Shard shard;               // run only this shard's tasks (see shard.hpp)
+  std::string out_flag = "--out";  // the option that set out_dir, named in errors about it
 };
 
 struct RunSummary {
@@ -40,6 +41,10 @@ RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
+// Creates task_output_dir before the job is recorded, so that a folder that cannot
+// be made (a file in its way, no permission) leaves the database as it was: throws
+// JobError(options.out_flag) naming the folder and the reason.
+std::string make_task_output_dir(const Job& job, const RunOptions& options);
 // The job's task counts at the end of a run, into the summary.
 void record_final_counts(const Counts& c, RunSummary& s);
 // "task 7 (#3: dt_factor=0.1)" for progress lines: the task id that query, status and

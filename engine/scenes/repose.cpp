@@ -197,6 +197,21 @@ void ReposeConfig::validate() const {
     throw ConfigError("repose.column_width", "must hold at least two of the largest grains");
   if (column_height < 2.0 * material.d_max)
     throw ConfigError("repose.column_height", "must hold at least two of the largest grains");
+  // The grain count follows from the sizes: checked here, where a typo (a 10 m
+  // column, a slab 1000 diameters deep) would otherwise run out of memory mid-task.
+  const double column_grains = overfill * target_solid_fraction * column_width * column_height * depth /
+                               (kPi / 6.0 * mean_cube_diameter(material));
+  const double length = domain_length > 0.0 ? domain_length : column_width + 4.0 * column_height + 0.02;
+  const double spacing = floor_spacing > 0.0 ? floor_spacing : material.d_max;
+  const double floor_grains = std::ceil(length / spacing) * std::ceil(depth / spacing);
+  if (!(column_grains + floor_grains <= kMaxReposeGrains)) {
+    std::ostringstream os;
+    os << "column " << column_width << " m x " << column_height << " m, slab " << depth << " m deep: about "
+       << static_cast<double>(static_cast<long long>((column_grains + floor_grains) / 1e5)) / 10.0
+       << " million grains, more than this scene takes (" << kMaxReposeGrains / 1e6
+       << " million); check repose.column_width, repose.column_height and repose.depth_diameters";
+    throw ConfigError("repose.column_width", os.str());
+  }
 }
 
 Metrics ReposeResult::metrics() const {

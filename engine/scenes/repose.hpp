@@ -47,6 +47,10 @@ const char* to_string(SideWalls s);
 // The inverse of to_string: false (s untouched) for an unknown name.
 bool parse_side_walls(const std::string& name, SideWalls& s);
 
+// The most grains (column and floor) a repose task may have: as the other scenes'
+// particle caps, a bound on typos, far above any column one machine settles.
+constexpr double kMaxReposeGrains = 5e6;
+
 struct ReposeConfig {
   Material material = repose_seed_material();
 

@@ -151,7 +151,7 @@ TEST(Distribute, MergeIsOneTransaction) {
   ASSERT_EQ(run_demcal({"merge", "part-1.db", "--into", "m.db"}, d.path.string()).rc, 0);
   const std::string before = dump(d.file("m.db"));
   const Result r = run_demcal({"merge", "part-2.db", "other-spec.db", "--into", "m.db"}, d.path.string());
-  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_EQ(r.rc, 2) << r.err;  // the parts' fault: bad input
   EXPECT_NE(r.err.find("different job file"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("nothing merged"), std::string::npos) << r.err;
   EXPECT_EQ(dump(d.file("m.db")), before);

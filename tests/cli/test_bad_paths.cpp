@@ -1,0 +1,159 @@
+// Paths and files that are not what they look like: names SQLite reads as something
+// else, control characters, bytes that are not UTF-8, devices, damaged databases,
+// files that cannot be job files. Each is refused (exit 2) naming the option or the
+// field, before anything is written.
+#include "cli_util.hpp"
+#include "dist_util.hpp"
+
+using namespace demcal::test;
+
+namespace {
+
+// A demcal database with one finished collision job, and a foreign one.
+void two_databases(const TempDir& d) {
+  write(d.file("j.json"), collision_job("small", {0.1}));
+  ASSERT_EQ(run_demcal({"run", "j.json", "--db", "ok.db"}, d.path.string()).rc, 0);
+  sql(d.file("other.db"), "CREATE TABLE t(x); INSERT INTO t VALUES(42);");
+}
+
+}  // namespace
+
+TEST(BadPaths, DatabaseNamesSqliteWouldNotReadAsTheFileAreRefused) {
+  TempDir d;
+  two_databases(d);
+  const std::string other = dump(d.file("other.db")), ok = dump(d.file("ok.db"));
+  // "file:..." is a URI to SQLite: it would open other.db behind the checks' back.
+  Result r = run_demcal({"run", "j.json", "--db", "file:other.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db: \"file:other.db\" would be read by SQLite as a URI"), std::string::npos) << r.err;
+  r = run_demcal({"merge", "ok.db", "--into", "FILE:other.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_EQ(dump(d.file("other.db")), other);
+  // ":memory:" would lose every result at exit.
+  r = run_demcal({"run", "j.json", "--db", ":memory:"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db: \":memory:\" is a database in memory"), std::string::npos) << r.err;
+  EXPECT_EQ(run_demcal({"merge", "ok.db", "--into", ":memory:"}, d.path.string()).rc, 2);
+  // A device reads as an empty file.
+  r = run_demcal({"run", "j.json", "--db", "/dev/null"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("/dev/null is not a regular file"), std::string::npos) << r.err;
+  EXPECT_EQ(run_demcal({"merge", "ok.db", "--into", "/dev/null"}, d.path.string()).rc, 2);
+  EXPECT_EQ(run_demcal({"merge", "ok.db", "--into", ""}, d.path.string()).rc, 2);
+  // ./file:x.db is a plain file name, and works.
+  r = run_demcal({"merge", "ok.db", "--into", "./file:copy.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_TRUE(fs::exists(d.file("file:copy.db")));
+  EXPECT_EQ(dump(d.file("ok.db")), ok);
+}
+
+TEST(BadPaths, ControlCharactersAndNonUtf8AreRefusedBeforeAnythingRuns) {
+  TempDir d;
+  two_databases(d);
+  // A newline would end a line of the gnuplot or batch script the path is written into.
+  Result r = run_demcal({"map", "--db", "ok.db", "--metric", "max_relative_error", "--out",
+                         "a\nsystem \"touch INJECTED\"\nb.png"},
+                        d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: the path contains a control character"), std::string::npos) << r.err;
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--out", "s.sh", "--parts", "/x/p\ntouch INJECTED\n#"},
+                 d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--parts: the path contains a control character"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("s.sh")));
+  EXPECT_FALSE(fs::exists(d.file("INJECTED")));
+  // Paths go into JSON records, which must be UTF-8: refused before a task runs.
+  r = run_demcal({"run", "j.json", "--db", "new.db", "--out", "out\xff"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: the path is not valid UTF-8"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("new.db")));
+  EXPECT_EQ(run_demcal({"run", "j.json", "--db", "d\xff.db"}, d.path.string()).rc, 2);
+  // map's --out may not be empty either.
+  EXPECT_EQ(run_demcal({"map", "--db", "ok.db", "--metric", "max_relative_error", "--out", ""}, d.path.string()).rc, 2);
+}
+
+TEST(BadPaths, AFileInTheWayOfTheJobsOutputFolderLeavesTheDatabaseAsItWas) {
+  TempDir d;
+  two_databases(d);
+  fs::create_directories(d.path / "out");
+  write(d.file("out/small"), "in the way");
+  const std::string ok = dump(d.file("ok.db"));
+  Result r = run_demcal({"run", "j.json", "--db", "new.db", "--out", "out"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: cannot create the output folder"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("new.db")));
+  write(d.file("j2.json"), collision_job("small2", {0.2}));
+  write(d.file("out/small2"), "in the way");
+  r = run_demcal({"run", "j2.json", "--db", "ok.db", "--out", "out"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_EQ(dump(d.file("ok.db")), ok);
+}
+
+TEST(BadPaths, NonFiniteNumbersInOptionsAreRefused) {
+  TempDir d;
+  two_databases(d);
+  // inf matched every task (|a - inf| <= 1e-12 inf), nan none.
+  for (const char* v : {"inf", "-inf", "1e999", "nan"}) {
+    const Result r = run_demcal({"query", "--db", "ok.db", "--where", std::string("dt_factor=") + v}, d.path.string());
+    EXPECT_EQ(r.rc, 2) << v;
+    EXPECT_NE(r.err.find("--where: dt_factor is a finite number"), std::string::npos) << r.err;
+  }
+  Result r = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--tolerance", "nan"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--tolerance: must be a finite number"), std::string::npos) << r.err;
+  r = run_demcal({"run", "j.json", "--db", "ok.db", "--mpi-timeout", "nan"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_FALSE(fs::exists(d.file("s.db")));
+}
+
+TEST(BadPaths, ADamagedDemcalDatabaseIsRefusedUntouched) {
+  TempDir d;
+  two_databases(d);
+  fs::copy_file(d.file("ok.db"), d.file("dropped.db"));
+  sql(d.file("dropped.db"), "DROP TABLE metrics;");
+  fs::copy_file(d.file("ok.db"), d.file("reset.db"));
+  sql(d.file("reset.db"), "PRAGMA user_version = 0;");
+  const std::string dropped = dump(d.file("dropped.db")), reset = dump(d.file("reset.db"));
+  Result r = run_demcal({"run", "j.json", "--db", "dropped.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("dropped.db is a damaged demcal database: table metrics is missing"), std::string::npos) << r.err;
+  r = run_demcal({"query", "--db", "reset.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("reset.db is a damaged demcal database: schema version 0"), std::string::npos) << r.err;
+  EXPECT_EQ(dump(d.file("dropped.db")), dropped);
+  EXPECT_EQ(dump(d.file("reset.db")), reset);
+}
+
+TEST(BadPaths, FilesThatCannotBeJobsAreRefused) {
+  TempDir d;
+  // Read up to a cap, not until memory runs out.
+  Result r = run_demcal({"validate", "/dev/zero"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("/dev/zero: larger than 16 MiB"), std::string::npos) << r.err;
+  // A stiffness that passes "> 0" but gives an infinite step.
+  nlohmann::json j = nlohmann::json::parse(collision_job("soft", {0.1}));
+  j["material"]["kn"] = 5e-324;
+  write(d.file("soft.json"), j.dump());
+  r = run_demcal({"validate", "soft.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("material.kn: task #0: the time step works out to inf s"), std::string::npos) << r.err;
+  // A column that would need billions of grains.
+  write(d.file("big.json"), R"({"name": "big", "scene": "repose", "fidelity": "quick",
+                                "repose": {"column_width": 10, "column_height": 10, "depth_diameters": 1000}})");
+  r = run_demcal({"validate", "big.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("repose.column_width"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("million grains, more than this scene takes"), std::string::npos) << r.err;
+}
+
+TEST(BadPaths, AMergeThatFailsOnConflictingJobsLeavesNoDestinationBehind) {
+  TempDir d;
+  write(d.file("a.json"), collision_job("same", {0.1}));
+  write(d.file("b.json"), collision_job("same", {0.2}));
+  ASSERT_EQ(run_demcal({"run", "a.json", "--db", "a.db"}, d.path.string()).rc, 0);
+  ASSERT_EQ(run_demcal({"run", "b.json", "--db", "b.db"}, d.path.string()).rc, 0);
+  const Result r = run_demcal({"merge", "a.db", "b.db", "--into", "new.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("was run from a different job file"), std::string::npos) << r.err;
+  for (const char* f : {"new.db", "new.db-wal", "new.db-shm"}) EXPECT_FALSE(fs::exists(d.file(f))) << f;
+}
