@@ -59,6 +59,13 @@ int run(const RunArgs& a) {
 #else
   const jobs::RunSummary s = jobs::run_job(store, job, opt);
 #endif
+  if (s.superseded) {
+    std::cerr << "demcal: error: job " << job.name << " was recorded again from a different job file by another run while "
+              << "this one was at work: the job now holds that file's tasks, so this run stopped after the " << s.ran
+              << " task(s) it ran (their results are kept: demcal query --db " << a.db
+              << " --where task=ID). Give one of the two jobs another name to keep both\n";
+    return kRuntime;
+  }
   const int hidden = jobs::print_rows(std::cout, jobs::select_rows(store, job.name, {}), {}, format);
   if (hidden > 0)
     std::cout << "(" << hidden << " more metrics per task: demcal query --db " << a.db << " --job " << job.name

@@ -35,21 +35,6 @@ int usable_cores() {
   return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
-
-std::string signal_name(int sig) {
-  switch (sig) {
-    case SIGABRT: return "SIGABRT";
-    case SIGSEGV: return "SIGSEGV";
-    case SIGBUS: return "SIGBUS";
-    case SIGFPE: return "SIGFPE";
-    case SIGILL: return "SIGILL";
-    case SIGKILL: return "SIGKILL";
-    case SIGTERM: return "SIGTERM";
-    case SIGINT: return "SIGINT";
-    default: return "signal " + std::to_string(sig);
-  }
-}
-
 struct Running {
   std::int64_t task_id;
   std::size_t index;
@@ -90,6 +75,8 @@ class Runner {
   int workers_ = 1, threads_ = 1, ran_ = 0;
   double busy_s_ = 0;  // summed wall time of tasks this run finished
   Counts counts_;
+  const std::string spec_ = job_.spec.dump();  // as record_job stores it
+  bool superseded_ = false;  // another run recorded another spec under this job's name
 };
 
 void Runner::prepare() {
@@ -134,6 +121,13 @@ void Runner::prepare() {
 
 void Runner::refill_queue() {
   queue_.clear();
+  // Another run may record a different job file under the same name while this one
+  // works: the job's tasks are then that file's, which this run must not take up
+  // (nor report as its own).
+  if (superseded_ || store_.job_spec(job_.name) != spec_) {
+    superseded_ = true;
+    return;
+  }
   for (auto& row : store_.tasks(job_.name))
     if (row.status == "pending" && opt_.shard.contains(static_cast<std::size_t>(row.index))) queue_.push_back(std::move(row));
 }
@@ -224,9 +218,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
     out = db::Outcome{};
     out->status = "failed";
     out->wall_s = wall;
-    out->error = WIFSIGNALED(wstatus) ? "worker killed by " + signal_name(WTERMSIG(wstatus))
-                                      : "worker exited with status " + std::to_string(WEXITSTATUS(wstatus)) +
-                                            " without a result";
+    out->error = worker_failure(wstatus, r.result_path);
   }
   store_.finish(r.task_id, token_, *out);
   ++ran_;
@@ -282,7 +274,7 @@ RunSummary Runner::run() {
       requeue_dead_runners(store_);
       refill_queue();
       const Counts c = counts();
-      if (queue_.empty() && running_.empty() && c.running == 0) break;  // all done or failed
+      if (queue_.empty() && running_.empty() && (c.running == 0 || superseded_)) break;  // all done or failed
       if (queue_.empty() && running_.empty()) {
         say_holders(holders_said);
         std::this_thread::sleep_for(std::chrono::milliseconds(200));  // another runner holds the rest
@@ -302,6 +294,7 @@ RunSummary Runner::run() {
   const Counts c = counts();
   record_final_counts(c, s);
   s.ran = ran_;
+  s.superseded = superseded_;
   return s;
 }
 

@@ -27,6 +27,9 @@ struct RunSummary {
   int reused = 0;   // already done when the run started (this job or another)
   int ran = 0;      // finished by this run
   bool interrupted = false;
+  // Another run recorded a different job file under this job's name meanwhile: this
+  // run stopped taking tasks, and the job's counts are that file's, not this one's.
+  bool superseded = false;
 };
 
 // Records the job, re-queues tasks of dead runners, runs what is pending until

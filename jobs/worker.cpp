@@ -119,10 +119,27 @@ int run_worker(const WorkerTask& t) {
     std::ofstream f(tmp, std::ios::trunc);
     f << out.dump();
     f.close();  // the write reaches the disk (or fails) here, before the check
-    if (!f) return 3;
+    if (!f) {
+      std::remove(tmp.c_str());  // no empty .tmp left behind on a full disk
+      return kWorkerResultUnwritable;
+    }
   }
   // rename is atomic: the parent sees a whole result or none.
-  return std::rename(tmp.c_str(), t.result_path.c_str()) == 0 ? 0 : 3;
+  if (std::rename(tmp.c_str(), t.result_path.c_str()) == 0) return 0;
+  std::remove(tmp.c_str());
+  return kWorkerResultUnwritable;
+}
+
+std::string worker_failure(int wait_status, const std::string& result_path) {
+  if (WIFSIGNALED(wait_status)) {
+    const char* abbrev = sigabbrev_np(WTERMSIG(wait_status));
+    return "worker killed by " + (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(WTERMSIG(wait_status)));
+  }
+  if (WIFEXITED(wait_status) && WEXITSTATUS(wait_status) == kWorkerResultUnwritable)
+    return "the worker ran the task but could not write its result to " + result_path +
+           " (disk full, or the folder not writable): the metrics are lost; free space and run it again";
+  return "worker exited with status " + std::to_string(WIFEXITED(wait_status) ? WEXITSTATUS(wait_status) : -1) +
+         " without a result";
 }
 
 std::optional<db::Outcome> read_worker_result(const std::string& path) {
@@ -190,13 +207,7 @@ std::string run_forked(const WorkerTask& t, double tick_s, const std::function<v
   }
   std::filesystem::remove(t.result_path);
   if (!text.empty() && parse_worker_result(text)) return text;
-  std::string error;
-  if (WIFSIGNALED(st)) {
-    const char* abbrev = sigabbrev_np(WTERMSIG(st));
-    error = "worker killed by " + (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(WTERMSIG(st)));
-  } else {
-    error = "worker exited with status " + std::to_string(WEXITSTATUS(st)) + " without a result";
-  }
+  const std::string error = worker_failure(st, t.result_path);
   const nlohmann::json out = {{"status", "failed"}, {"error", error}, {"wall_s", wall},
                               {"metrics", nlohmann::json::array()}, {"artifacts", nlohmann::json::array()}};
   return out.dump();

@@ -36,6 +36,12 @@ std::string task_file_name(std::int64_t task_id, const std::string& task_key);
 // fails its task only.
 int run_worker(const WorkerTask& task);
 
+// The exit status of a worker that ran its task but could not write the result
+// file (disk full, folder gone): the parent says so instead of "no result".
+constexpr int kWorkerResultUnwritable = 3;
+// Why a worker that left no result failed, from its wait status.
+std::string worker_failure(int wait_status, const std::string& result_path);
+
 // The result a worker left, or nullopt when there is none or it is unreadable.
 std::optional<db::Outcome> read_worker_result(const std::string& path);
 // The same from the result's JSON text (as the MPI task farm sends it).

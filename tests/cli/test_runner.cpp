@@ -2,6 +2,7 @@
 // and overlapping jobs.
 #include "cli_util.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <set>
@@ -167,6 +168,33 @@ TEST(Runner, TwoJobsConcurrentlyOnOneDatabase) {
   EXPECT_EQ(all.size(), 6u);
   EXPECT_EQ(count_status(all, "done"), 6);
   for (const auto& t : all) EXPECT_EQ(t.attempts, 1);
+}
+
+TEST(Runner, AnotherJobFileRecordedUnderTheSameNameStopsTheFirstRunLoudly) {
+  // Run a works through its own tasks; meanwhile run b records another job file
+  // under the same name. a must not take up b's tasks nor print them as its own.
+  TempDir d;
+  write(d.file("a.json"), collision_job("same", {0.05, 0.06, 0.07}, 300, 60000));
+  write(d.file("b.json"), collision_job("same", {0.2, 0.3}, 30, 400));
+  const pid_t pa = spawn({"run", "a.json", "--workers", "1"}, d.path.string(), {}, "a");
+  for (int i = 0; i < 600; ++i) {  // until a has claimed its first task
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (!fs::exists(d.file("demcal.db"))) continue;
+    const auto rows = tasks_of(d.file("demcal.db"), "same");
+    if (std::any_of(rows.begin(), rows.end(), [](const auto& t) { return t.status == "running"; })) break;
+  }
+  const Result rb = finish(spawn({"run", "b.json", "--workers", "1"}, d.path.string(), {}, "b"), d.path.string(), "b");
+  EXPECT_EQ(rb.rc, 0) << rb.err;
+  const Result ra = finish(pa, d.path.string(), "a");
+  EXPECT_EQ(ra.rc, 1) << ra.err;
+  EXPECT_NE(ra.err.find("job same was recorded again from a different job file by another run"), std::string::npos)
+      << ra.err;
+  EXPECT_EQ(ra.out.find("0.2"), std::string::npos) << "b's tasks printed as a's: " << ra.out;
+  // b's tasks were run by b alone, once each.
+  for (const auto& t : tasks_of(d.file("demcal.db"), "same")) {
+    EXPECT_EQ(t.status, "done");
+    EXPECT_EQ(t.attempts, 1);
+  }
 }
 
 TEST(Runner, OverlappingJobsReuseFinishedWorkByKey) {

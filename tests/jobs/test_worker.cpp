@@ -10,6 +10,8 @@
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
+#include <sys/wait.h>
+#include <unistd.h>
 
 using demcal::jobs::parse_worker_result;
 
@@ -87,6 +89,34 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
     EXPECT_NE(std::string(e.what()).find("cannot write the HDF5 file " + bad), std::string::npos) << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(bad));
+}
+
+// A worker that ran its task but cannot write the result (a full disk; here a
+// folder in the way of the file) exits with its own status, leaves no .tmp, and the
+// parent's message says what happened instead of "without a result".
+TEST(WorkerResult, AResultThatCannotBeWrittenIsNamedAndLeavesNoTmp) {
+  demcal::test::TempDir d;
+  WorkerTask t;
+  t.task_id = 1;
+  t.scene = "no-such-scene";  // fails at once: the result still has to be written
+  t.h5_path = d.file("1.h5");
+  t.result_path = d.file("r.json");
+  std::filesystem::create_directories(t.result_path + ".tmp");  // the .tmp cannot be opened as a file
+  EXPECT_EQ(run_worker(t), kWorkerResultUnwritable);
+  std::filesystem::remove(t.result_path + ".tmp");
+  std::filesystem::create_directories(t.result_path);  // now the rename fails
+  EXPECT_EQ(run_worker(t), kWorkerResultUnwritable);
+  EXPECT_FALSE(std::filesystem::exists(t.result_path + ".tmp"));
+  const pid_t pid = fork();
+  if (pid == 0) _exit(kWorkerResultUnwritable);
+  int st = 0;
+  ASSERT_EQ(waitpid(pid, &st, 0), pid);
+  const std::string why = worker_failure(st, t.result_path);
+  EXPECT_NE(why.find("could not write its result to " + t.result_path + " (disk full"), std::string::npos) << why;
+  const pid_t other = fork();
+  if (other == 0) _exit(7);
+  ASSERT_EQ(waitpid(other, &st, 0), other);
+  EXPECT_EQ(worker_failure(st, t.result_path), "worker exited with status 7 without a result");
 }
 
 }  // namespace
