@@ -397,6 +397,9 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   const Counts c = counts();
   record_final_counts(c, s);
   s.ran = ran;
+  // The root's queue is filled once, so it only ever ran this file's tasks; but the
+  // job's counts and table are another file's if a run re-recorded the name meanwhile.
+  s.superseded = store.job_spec(job.name) != job.spec.dump();
   return s;
 }
 
