@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fcntl.h>
+#include <unistd.h>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -343,7 +345,13 @@ MergeReport merge_databases(const std::string& into, const std::vector<std::stri
   check_file(into);
   // A merge that fails (two parts ran different job files under one name) rolls
   // back; a destination it created is removed too, so nothing is left half-made.
-  const bool created = !std::filesystem::exists(into);
+  // Created exclusively (O_EXCL): a file another process made meanwhile, or the
+  // target of a dangling link, is not ours to remove.
+  bool created = false;
+  if (const int fd = ::open(into.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644); fd >= 0) {
+    ::close(fd);
+    created = true;
+  }
   try {
     return merge_into(into, parts);
   } catch (...) {

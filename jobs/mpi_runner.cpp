@@ -180,6 +180,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   StopSignalGuard guard;
   const std::string token = runner_token();
   const std::filesystem::path dir = make_task_output_dir(job, options);
+  const std::string spec = job.spec.dump();  // as record_job stores it
   const std::int64_t job_id = record_job(store, job, options.shard, log);
   Heartbeat heartbeat(store, token);  // before the re-queue of dead runners' tasks
   if (options.requeue_running)
@@ -329,6 +330,12 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (!k.ready || k.lost || k.stopped) continue;
       while (!queue.empty() && !k.task) {
+        // Another run recorded a different job file under this name: the queued
+        // tasks left the job, so none more is handed out.
+        if (store.job_spec(job.name) != spec) {
+          queue.clear();
+          break;
+        }
         db::TaskRow row = queue.front();
         queue.pop_front();
         if (!store.claim(row.id, token)) continue;  // another runner took it
@@ -397,9 +404,9 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   const Counts c = counts();
   record_final_counts(c, s);
   s.ran = ran;
-  // The root's queue is filled once, so it only ever ran this file's tasks; but the
-  // job's counts and table are another file's if a run re-recorded the name meanwhile.
-  s.superseded = store.job_spec(job.name) != job.spec.dump();
+  // The job's counts and table are another file's if a run re-recorded the name
+  // meanwhile (the hand-out above stopped then).
+  s.superseded = store.job_spec(job.name) != spec;
   return s;
 }
 

@@ -54,6 +54,8 @@ class Runner {
  private:
   void prepare();
   void refill_queue();
+  // Whether another run has recorded a different job file under this job's name.
+  bool superseded();
   void launch(const db::TaskRow& row);
   void reap(bool stopping);
   void handle_exit(const Running& r, int wstatus, bool stopping);
@@ -119,15 +121,17 @@ void Runner::prepare() {
   if (!queue_.empty()) *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
 }
 
+bool Runner::superseded() {
+  if (!superseded_) superseded_ = store_.job_spec(job_.name) != spec_;
+  return superseded_;
+}
+
 void Runner::refill_queue() {
   queue_.clear();
   // Another run may record a different job file under the same name while this one
   // works: the job's tasks are then that file's, which this run must not take up
   // (nor report as its own).
-  if (superseded_ || store_.job_spec(job_.name) != spec_) {
-    superseded_ = true;
-    return;
-  }
+  if (superseded()) return;
   for (auto& row : store_.tasks(job_.name))
     if (row.status == "pending" && opt_.shard.contains(static_cast<std::size_t>(row.index))) queue_.push_back(std::move(row));
 }
@@ -261,6 +265,10 @@ RunSummary Runner::run() {
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
+      if (superseded()) {  // checked per task: the queued tasks left the job with the old spec
+        queue_.clear();
+        break;
+      }
       const db::TaskRow row = queue_.front();
       queue_.pop_front();
       if (store_.claim(row.id, token_)) launch(row);

@@ -68,6 +68,14 @@ TEST(BadPaths, ControlCharactersAndNonUtf8AreRefusedBeforeAnythingRuns) {
   EXPECT_NE(r.err.find("--out: the path is not valid UTF-8"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.file("new.db")));
   EXPECT_EQ(run_demcal({"run", "j.json", "--db", "d\xff.db"}, d.path.string()).rc, 2);
+  // Overlong forms, surrogates and code points past U+10FFFF are not UTF-8 either.
+  for (const char* bad : {"ov\xc0\xaf", "sur\xed\xa0\x80", "big\xf5\x80\x80\x80", "cut\xe2\x82"})
+    EXPECT_EQ(run_demcal({"run", "j.json", "--db", "new.db", "--out", bad}, d.path.string()).rc, 2) << bad;
+  EXPECT_FALSE(fs::exists(d.file("new.db")));
+  // Well-formed UTF-8 (and blanks) work.
+  const Result ok = run_demcal({"run", "j.json", "--db", "ok.db", "--out", "résultats \xe2\x82\xac \xf0\x9f\x8c\x8a"},
+                               d.path.string());
+  EXPECT_EQ(ok.rc, 0) << ok.err;
   // map's --out may not be empty either.
   EXPECT_EQ(run_demcal({"map", "--db", "ok.db", "--metric", "max_relative_error", "--out", ""}, d.path.string()).rc, 2);
 }
