@@ -1,5 +1,7 @@
 #include "map.hpp"
 
+#include "jobs/private_temp_dir.hpp"
+
 #include "jobs/job_error.hpp"
 #include "jobs/series_plot.hpp"
 
@@ -110,16 +112,8 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
       if (it == node.end() || it->second->hole()) holes.emplace_back(rs.thetas[i], rs.etas[j]);
     }
 
-  const auto tmp = fs::temp_directory_path() / ("demcal-map-" + std::to_string(getpid()));
-  fs::create_directories(tmp);
-  auto path = [&](const char* n) { return (tmp / n).string(); };
-  struct Cleanup {
-    fs::path p;
-    ~Cleanup() {
-      std::error_code ec;
-      fs::remove_all(p, ec);
-    }
-  } cleanup{tmp};
+  const jobs::PrivateTempDir tmp("demcal-map");
+  auto path = [&](const char* n) { return tmp.file(n); };
 
   // SVG writes every quadrangle as a path: fewer of them keep the file small.
   const int n = std::max(21, ext == ".svg" ? std::min(r.fine, 81) : r.fine);

@@ -115,9 +115,13 @@ std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job
   const std::string prefix = job + ".refine";
   for (const auto& [name, counts] : store.counts("")) {
     (void)counts;
-    if (name.rfind(prefix, 0) == 0 && is_refine_job(name) &&
-        name.find('.', prefix.size()) == std::string::npos)
-      found.emplace_back(std::stoi(name.substr(prefix.size())), name);
+    if (name.rfind(prefix, 0) != 0 || !is_refine_job(name) || name.find('.', prefix.size()) != std::string::npos)
+      continue;
+    // The round number as refine_job_name writes it; a longer run of digits (a job
+    // of some other origin) is no round of ours.
+    const std::string digits = name.substr(prefix.size());
+    if (digits.size() > 6) continue;
+    found.emplace_back(std::stoi(digits), name);
   }
   std::sort(found.begin(), found.end());
   std::vector<std::string> out;

@@ -5,12 +5,14 @@
 #include "jobs/job_spec.hpp"
 #include "jobs/shard.hpp"
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <regex>
 #include <sys/stat.h>
+#include <utility>
 
 namespace demcal::cli {
 namespace {
@@ -101,6 +103,23 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
   return s.str();
 }
 
+// The script may replace an earlier script of demcal's, nothing else: --out given as
+// the database or the job file (a slip of the hand) would destroy the results.
+void refuse_to_overwrite(const SlurmArgs& a) {
+  std::error_code ec;
+  if (!fs::exists(a.out, ec)) return;
+  for (const auto& [other, what] : {std::pair{a.db, "the database (--db)"}, std::pair{a.job, "the job file"}})
+    if (fs::exists(other, ec) && fs::equivalent(a.out, other, ec))
+      throw jobs::JobError("--out", a.out + " is " + what + "; the script needs a name of its own");
+  std::ifstream in(a.out);
+  std::string first, second;
+  std::getline(in, first);
+  std::getline(in, second);
+  if (!fs::is_regular_file(a.out, ec) || first != "#!/usr/bin/env bash" ||
+      second.rfind("# SLURM array job for demcal job", 0) != 0)
+    throw jobs::JobError("--out", a.out + " exists and is not a script demcal wrote; choose another name or remove it");
+}
+
 int slurm(SlurmArgs a) {
   check_token("--partition", a.partition, "[A-Za-z0-9_.,-]{1,200}", "a partition name (letters, digits, _ . , -)");
   check_token("--time", a.time, "[0-9]{1,6}(-[0-9]{1,2})?(:[0-9]{1,2}){0,2}", "a SLURM time limit such as 30, 4:00:00 or 1-12:00:00");
@@ -124,13 +143,24 @@ int slurm(SlurmArgs a) {
     throw jobs::JobError("--demcal", "no such file: " + fs::absolute(a.demcal).string());
   if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))
     throw jobs::JobError("--demcal", fs::absolute(a.demcal).string() + " is not a file (give the demcal executable)");
+  refuse_to_overwrite(a);
   const std::string text = script(a, job);
+  // Written beside its name and renamed: a failed write leaves an earlier script whole.
+  const std::string part = a.out + ".part";
   {
-    std::ofstream f(a.out, std::ios::trunc);
+    std::ofstream f(part, std::ios::trunc);
     f << text;
-    if (!f) throw std::runtime_error("cannot write " + a.out);
+    f.close();
+    if (!f) {
+      std::remove(part.c_str());
+      throw std::runtime_error("cannot write " + a.out);
+    }
   }
-  ::chmod(a.out.c_str(), 0755);
+  ::chmod(part.c_str(), 0755);
+  if (std::rename(part.c_str(), a.out.c_str()) != 0) {
+    std::remove(part.c_str());
+    throw std::runtime_error("cannot write " + a.out);
+  }
   std::cout << "wrote " << a.out << ": " << job.tasks.size() << " task(s) of job " << job.name << " in " << a.array
             << " shard(s) plus a merge into " << fs::absolute(a.db).string() << "\nsubmit with: bash " << a.out << "\n";
   if (static_cast<std::size_t>(a.array) > job.tasks.size())

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <vector>
 
 namespace demcal::db {
 namespace {
@@ -106,7 +107,14 @@ bool Connection::open_read_only(const std::string& path) {
   std::error_code ec;
   const std::string wal = path + "-wal";
   const bool wal_empty = !std::filesystem::exists(wal, ec) || std::filesystem::file_size(wal, ec) == 0;
-  for (const char* query : {"mode=ro", "immutable=1"}) {
+  // No -wal and no -shm: no connection has the database open in WAL mode, so the file
+  // is the whole database and is read as immutable, which creates nothing. mode=ro
+  // would make a -shm and -wal beside it with the file's read-only permissions,
+  // left behind at close, and the owner's next write would fail on them.
+  const bool no_log = !std::filesystem::exists(wal, ec) && !std::filesystem::exists(path + "-shm", ec);
+  const std::vector<const char*> order =
+      no_log ? std::vector<const char*>{"immutable=1", "mode=ro"} : std::vector<const char*>{"mode=ro", "immutable=1"};
+  for (const char* query : order) {
     if (std::string(query) == "immutable=1" && !wal_empty)
       throw DbError("cannot read database " + path + ": its write-ahead log " + wal +
                         " holds changes not yet in the file, and reading them needs SQLite's -shm file beside it, "

@@ -255,7 +255,14 @@ Job load_job_file(const std::string& path) {
   if (text.size() > kMaxJobFileBytes)
     throw JobError("", path + ": larger than " + std::to_string(kMaxJobFileBytes >> 20) +
                            " MiB, which no job file is (a grid is a list of values, not the values of every task)");
-  return parse_job(text, path);
+  Job job = parse_job(text, path);
+  // "<job>.refine<N>" is the name `demcal fit --refine` gives its rounds of <job>: a
+  // job file of that name would be read as one of them (and break <job>'s fits).
+  static const std::regex reserved(".*\\.refine[0-9]+");
+  if (std::regex_match(job.name, reserved))
+    throw JobError("name", "\"" + job.name + "\" ends in .refine<N>, the names demcal fit --refine gives its rounds; "
+                                              "choose another name");
+  return job;
 }
 
 }  // namespace demcal::jobs

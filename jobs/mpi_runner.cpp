@@ -1,4 +1,5 @@
 #include "mpi_runner.hpp"
+#include "private_temp_dir.hpp"
 
 #include "liveness.hpp"
 #include "stop_signal.hpp"
@@ -124,6 +125,7 @@ int serve(const MpiOptions& options) {
   const double hb = heartbeat_interval(options);
   const std::string who = "demcal: rank " + std::to_string(rank) + ": ";
   try {
+    const PrivateTempDir results("demcal-rank" + std::to_string(rank));  // the tasks' result files
     send(0, kTagReady, "");
     // Rank 0 answers every READY or RESULT at once (a task or STOP), except at the
     // start while it records the job; silence far beyond that means it is gone.
@@ -154,10 +156,7 @@ int serve(const MpiOptions& options) {
       t.snapshots = j.at("snapshots").get<bool>();
       t.task_key = j.at("task_key").get<std::string>();
       t.h5_path = j.at("h5_path").get<std::string>();
-      t.result_path = (std::filesystem::temp_directory_path() /
-                       ("demcal-rank" + std::to_string(rank) + "-" + std::to_string(getpid()) + "-task" +
-                        std::to_string(t.task_id) + ".result.json"))
-                          .string();
+      t.result_path = results.file("task" + std::to_string(t.task_id) + ".result.json");
       test_kill_rank_hook(t.index);
       const std::string beat = std::to_string(t.task_id);
       const std::string result = run_forked(t, hb, [&] { send(0, kTagHeartbeat, beat); });

@@ -346,6 +346,10 @@ std::string make_task_output_dir(const Job& job, const RunOptions& options) {
   if (ec || !std::filesystem::is_directory(dir))
     throw JobError(options.out_flag, "cannot create the output folder " + dir + ": " +
                                          (ec ? ec.message() : std::string("a file of that name is in the way")));
+  // An earlier run's folder owned by someone else: found now, not after every task
+  // has run and failed to write its result.
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw JobError(options.out_flag, "cannot write into the output folder " + dir + " (check its owner and permissions)");
   return dir;
 }
 

@@ -1,4 +1,5 @@
 #include "series_plot.hpp"
+#include "private_temp_dir.hpp"
 
 #include "hdf5_writer.hpp"
 #include "job_error.hpp"
@@ -108,9 +109,8 @@ void plot_series(const PlotRequest& r) {
   if (yi.empty()) throw JobError("--y", "give at least one column");
 
   ImageFile image(r.out);
-  const auto tmp = std::filesystem::temp_directory_path() / ("demcal-plot-" + std::to_string(getpid()));
-  std::filesystem::create_directories(tmp);
-  const std::string data = (tmp / "data.txt").string(), script = (tmp / "plot.gp").string();
+  const PrivateTempDir tmp("demcal-plot");
+  const std::string data = tmp.file("data.txt"), script = tmp.file("plot.gp");
   {
     std::ofstream d(data);
     d.precision(17);
@@ -142,13 +142,7 @@ void plot_series(const PlotRequest& r) {
         << (unit(yi[i]) == u1 ? " axes x1y1" : " axes x1y2") << " with lines title " << quoted(label(r.y[i], yi[i]));
     g << "\n";
   }
-  try {
-    run_gnuplot(script);
-  } catch (...) {
-    std::filesystem::remove_all(tmp);
-    throw;
-  }
-  std::filesystem::remove_all(tmp);
+  run_gnuplot(script);
   image.commit();
 }
 

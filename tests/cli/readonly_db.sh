@@ -76,6 +76,21 @@ PY
     echo "note: python's sqlite3 checkpointed on exit; the -wal case was not exercised"
   fi
 fi
+# A read-only file in a writable folder: reading it leaves nothing beside it (files
+# made with the database's read-only permissions would make its owner's next run fail).
+left=$(ls "$T/open")
+[[ "$left" == "x.db" ]] || { echo "FAIL: files left beside the read-only database: $left"; fail=1; }
+chmod 644 "$T/open/x.db"
+"$T/demcal" run "$T/j.json" --db "$T/open/x.db" --out "$T/out" > /dev/null 2>&1 ||
+  { echo "FAIL: the owner's run after the readers failed"; fail=1; }
+# The job's output folder left by an earlier run of someone else's: refused before
+# any task runs, and nothing recorded.
+mkdir -p "$T/outs2/ro" "$T/mine"
+chmod 777 "$T/outs2"
+chmod 755 "$T/outs2/ro"  # the job's folder, root's
+chmod 777 "$T/mine"
+expect 2 "cannot write into the output folder" -- run "$T/j.json" --db "$T/mine/n.db" --out "$T/outs2"
+[[ ! -e "$T/mine/n.db" ]] || { echo "FAIL: a run refused for its output folder made its database"; fail=1; }
 [[ $(md5sum < "$T/shut/x.db") == "$sum" ]] || { echo "FAIL: the read-only database changed"; fail=1; }
 left=$(ls "$T/shut")
 [[ "$left" == "x.db" ]] || { echo "FAIL: files left in the read-only folder: $left"; fail=1; }

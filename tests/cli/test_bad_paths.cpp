@@ -165,3 +165,38 @@ TEST(BadPaths, AMergeThatFailsOnConflictingJobsLeavesNoDestinationBehind) {
   EXPECT_NE(r.err.find("was run from a different job file"), std::string::npos) << r.err;
   for (const char* f : {"new.db", "new.db-wal", "new.db-shm"}) EXPECT_FALSE(fs::exists(d.file(f))) << f;
 }
+
+TEST(BadPaths, TheBatchScriptNeverReplacesTheDatabaseTheJobFileOrAnotherFile) {
+  TempDir d;
+  two_databases(d);
+  const std::string ok = dump(d.file("ok.db")), job = slurp(d.file("j.json"));
+  Result r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "ok.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: ok.db is the database (--db)"), std::string::npos) << r.err;
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "./j.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("is the job file"), std::string::npos) << r.err;
+  write(d.file("notes.txt"), "mine\n");
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "notes.txt"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("exists and is not a script demcal wrote"), std::string::npos) << r.err;
+  EXPECT_EQ(dump(d.file("ok.db")), ok);
+  EXPECT_EQ(slurp(d.file("j.json")), job);
+  EXPECT_EQ(slurp(d.file("notes.txt")), "mine\n");
+  // Its own earlier script it replaces.
+  ASSERT_EQ(run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "s.sh"}, d.path.string()).rc, 0);
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "ok.db", "--out", "s.sh"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(slurp(d.file("s.sh")).find("in 3 shard(s)"), std::string::npos);
+  EXPECT_FALSE(fs::exists(d.file("s.sh.part")));
+}
+
+TEST(BadPaths, AJobFileMayNotTakeTheNameOfARefinementRound) {
+  TempDir d;
+  write(d.file("r.json"), collision_job("grid.refine7", {0.1}));
+  const Result r = run_demcal({"validate", "r.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("name: \"grid.refine7\" ends in .refine<N>"), std::string::npos) << r.err;
+  write(d.file("ok.json"), collision_job("grid.refined", {0.1}));
+  EXPECT_EQ(run_demcal({"validate", "ok.json"}, d.path.string()).rc, 0);
+}
