@@ -1,18 +1,21 @@
 // demcal study timestep|grazing|fidelity|repose-fidelity: speed-against-accuracy studies (issue 9).
 #include "common.hpp"
 
+#include "db/schema.hpp"
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/study.hpp"
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <stdexcept>
 #include <iostream>
 #include <memory>
 #include <unistd.h>
 
 namespace demcal::cli {
+namespace fs = std::filesystem;
 namespace {
 
 struct StudyArgs {
@@ -98,7 +101,22 @@ int study(const StudyArgs& a) {
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
-  require_writable_dir(a.out.empty() ? "--db" : "--out", o.out_dir);  // before the database is written
+  const std::string flag = a.out.empty() ? "--db" : "--out";
+  require_writable_dir(flag, o.out_dir);  // before the database is written
+  // The folders the study writes into made now, and the database checked, before the
+  // database is made: a file or a link in their way would otherwise stop the study
+  // after it had recorded its jobs.
+  for (const char* sub : {"", "tasks", "jobs"}) {
+    if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
+      continue;
+    const fs::path dir = fs::path(o.out_dir) / sub;
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec || !fs::is_directory(dir))
+      throw jobs::JobError(flag, "cannot create the folder " + dir.string() + ": " +
+                                     (ec ? ec.message() : std::string("a file of that name is in the way")));
+  }
+  if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {
     const jobs::GrazingStudy s = jobs::run_grazing_study(o);

@@ -5,6 +5,7 @@
 #include "scene_registry.hpp"
 #include "text_groups.hpp"
 
+#include <stdexcept>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -281,11 +282,34 @@ std::string task_artifact(db::Store& store, std::int64_t task_id, const std::str
   return found;
 }
 
+namespace {
+// demcal stores a task's parameters as one flat object; a database is a file anyone
+// can edit, though, and parameters nested thousands of levels deep would overflow
+// the stack of the recursive code that walks JSON. Deeper than this reads as corrupt.
+constexpr int kMaxStoredDepth = 16;
+
+nlohmann::json parse_stored_params(const std::string& text) {
+  int depth = 0;
+  const auto too_deep = [&](int d, nlohmann::json::parse_event_t e, nlohmann::json&) {
+    (void)d;
+    if (e == nlohmann::json::parse_event_t::object_start || e == nlohmann::json::parse_event_t::array_start) ++depth;
+    if (e == nlohmann::json::parse_event_t::object_end || e == nlohmann::json::parse_event_t::array_end) --depth;
+    if (depth > kMaxStoredDepth) throw std::length_error("nested too deep");
+    return true;
+  };
+  try {
+    return nlohmann::json::parse(text, too_deep);
+  } catch (const std::exception&) {
+    return nlohmann::json::value_t::discarded;
+  }
+}
+}  // namespace
+
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where) {
   std::vector<ResultRow> all;
   for (auto& t : store.tasks(job)) {
     ResultRow r;
-    r.params = nlohmann::json::parse(t.params_json, nullptr, false);
+    r.params = parse_stored_params(t.params_json);
     r.task = std::move(t);
     all.push_back(std::move(r));
   }

@@ -22,6 +22,14 @@ namespace demcal::jobs {
 namespace fs = std::filesystem;
 namespace {
 
+// A study's tables, advice and job files are its result: a write that fails (disk
+// full, a folder or a device in the way) is an error, not a "wrote" line.
+void close_checked(std::ofstream& f, const std::string& path) {
+  f.close();
+  if (!f) throw std::runtime_error("cannot write " + path + " (disk full, or not a writable file)");
+}
+
+
 // Relative energy drift per simulated second the recommendation accepts: 10% of
 // the energy per simulated second of this gas, in which friction and rolling
 // dissipate about 170% per simulated second (so the integrator's error stays below
@@ -135,6 +143,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
         << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
         << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
     }
+    close_checked(c, csv.string());
   }
   s.files.push_back(csv.string());
 
@@ -317,6 +326,7 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   {
     std::ofstream r(fs::path(o.out_dir) / "timestep_recommendation.txt");
     r << s.recommendation << "\n";
+    close_checked(r, (fs::path(o.out_dir) / "timestep_recommendation.txt").string());
     s.files.push_back((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
   }
   return s;
@@ -361,6 +371,7 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
     for (const auto& r : s.rows)
       c << r.target << "," << r.incidence_deg << "," << r.dt_fraction << "," << r.energy_ratio << ","
         << r.max_energy_ratio << "," << r.rebound_deg << "," << (r.slid ? 1 : 0) << "\n";
+    close_checked(c, csv.string());
     std::ofstream d(data);
     d.precision(10);
     for (double f : fractions)
@@ -736,6 +747,7 @@ void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
       std::replace(fails.begin(), fails.end(), '"', '\'');
       c << "," << p.score << "," << p.pass << "," << p.pareto << "," << p.recommended << ",\"" << fails << "\"\n";
     }
+  close_checked(c, csv.string());
 }
 
 }  // namespace
@@ -797,7 +809,9 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   for (const auto& kj : jobs)
     for (const auto& j : kj) {
       const fs::path f = dir / "jobs" / (j.name + ".json");
-      std::ofstream(f) << j.spec.dump(2) << "\n";
+      std::ofstream jf(f);
+      jf << j.spec.dump(2) << "\n";
+      close_checked(jf, f.string());
       s.job_files.push_back(f.string());
       for (const auto& t : j.tasks) keys.insert(t.key);
     }
@@ -948,6 +962,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
       r << "failed tasks:\n";
       for (const auto& f : s.failures) r << "  " << f << "\n";
     }
+    close_checked(r, rec.string());
   }
   s.files.push_back(rec.string());
   return s;

@@ -200,3 +200,36 @@ TEST(BadPaths, AJobFileMayNotTakeTheNameOfARefinementRound) {
   write(d.file("ok.json"), collision_job("grid.refined", {0.1}));
   EXPECT_EQ(run_demcal({"validate", "ok.json"}, d.path.string()).rc, 0);
 }
+
+TEST(BadPaths, ParametersNestedDeepInAnEditedDatabaseDoNotCrashTheReaders) {
+  TempDir d;
+  two_databases(d);
+  sql(d.file("ok.db"), "UPDATE tasks SET params_json = '" + std::string(200000, '[') + std::string(200000, ']') + "'");
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"query", "--db", "ok.db", "--format", "json"}, {"query", "--db", "ok.db"},
+        {"status", "--db", "ok.db"}}) {
+    const Result r = run_demcal(args, d.path.string());
+    EXPECT_LE(r.rc, 2) << args[0] << ": a crash, not an answer: " << r.err;
+  }
+  const Result r = run_demcal({"map", "--db", "ok.db", "--metric", "max_relative_error"}, d.path.string());
+  EXPECT_LE(r.rc, 2) << r.err;
+}
+
+TEST(BadPaths, AStudyWhoseTableCannotBeWrittenSaysSoInsteadOfWrote) {
+  TempDir d;
+  fs::create_directories(d.path / "so" / "timestep.csv");  // a folder where the table goes
+  const Result r = run_demcal({"study", "timestep", "--quick", "--db", "so.db", "--out", "so"}, d.path.string());
+  EXPECT_EQ(r.rc, 1);
+  EXPECT_NE(r.err.find("cannot write so/timestep.csv"), std::string::npos) << r.err;
+  EXPECT_EQ(r.out.find("wrote"), std::string::npos) << r.out;
+}
+
+TEST(BadPaths, AStudyWhoseFoldersCannotBeMadeMakesNoDatabase) {
+  TempDir d;
+  fs::create_directories(d.path / "o");
+  write(d.file("o/tasks"), "in the way");
+  const Result r = run_demcal({"study", "timestep", "--quick", "--db", "n.db", "--out", "o"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: cannot create the folder o/tasks"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("n.db")));
+}
