@@ -314,8 +314,10 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
   return rounds;
 }
 
-PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log) {
-  return [out_dir, workers, log](db::Store& store, const std::string& job, int round, const std::vector<RefinePoint>& points) {
+PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log,
+                             const std::vector<jobs::Where>& where) {
+  return [out_dir, workers, log, where](db::Store& store, const std::string& job, int round,
+                                        const std::vector<RefinePoint>& points) {
     const auto text = store.job_spec(job);
     if (!text) throw JobError("--job", "no job named \"" + job + "\"");
     nlohmann::json spec = nlohmann::json::parse(*text);
@@ -325,6 +327,15 @@ PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostre
     if (!spec.contains("grid") || !spec["grid"].is_object()) spec["grid"] = nlohmann::json::object();
     spec["grid"]["theta_deg"] = std::vector<double>(th.begin(), th.end());
     spec["grid"]["eta"] = std::vector<double>(et.begin(), et.end());
+    // A grid axis the fit was pinned to (--where packing=dense) runs at that value
+    // only: the other values would cost runs the fit never reads.
+    for (const auto& w : where) {
+      if (!spec["grid"].contains(w.key)) continue;
+      nlohmann::json pinned;
+      for (const auto& v : spec["grid"][w.key])
+        if (jobs::value_matches(v, w.value)) pinned = v;
+      if (!pinned.is_null()) spec["grid"][w.key] = nlohmann::json::array({pinned});
+    }
     if (spec.contains("material") && spec["material"].is_object()) {
       spec["material"].erase("theta_deg");
       spec["material"].erase("eta");

@@ -80,7 +80,9 @@ std::vector<RefinePoint> refine_points(const ResponseSurface& rs, double theta, 
 std::vector<RefineRound> refine(db::Store& store, const FitRequest& request, Calibration& cal, const RefineOptions& options);
 
 // The real runner: a sub-job of `job` whose grid is the points' theta x eta values
-// (other axes as in the job), run by jobs::run_job into the store.
-PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log);
+// (other axes as in the job, except those `where` pins: those take the pinned value
+// alone, as the fit read only them), run by jobs::run_job into the store.
+PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log,
+                             const std::vector<jobs::Where>& where = {});
 
 }  // namespace demcal::calibrate

@@ -119,7 +119,7 @@ void add_fit(CLI::App& app, int& exit_code) {
         calibrate::RefineOptions ro;
         ro.rounds = a->refine;
         ro.log = &std::cerr;
-        ro.run_points = calibrate::dem_point_runner(out_dir, a->workers, &std::cerr);
+        ro.run_points = calibrate::dem_point_runner(out_dir, a->workers, &std::cerr, req.where);
         rounds = calibrate::refine(store, req, cal, ro);
         if (!rounds.empty()) id = rounds.back().fit_id;
       }

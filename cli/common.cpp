@@ -3,6 +3,7 @@
 #include "db/sqlite.hpp"
 #include "jobs/job_error.hpp"
 
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -22,6 +23,16 @@ int guarded(const std::string& context, const std::function<int()>& body) {
   } catch (const db::DbError& e) {
     std::cerr << "demcal: error: " << e.what() << "\n";
     return e.bad_input() ? kBadInput : kRuntime;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A path the user gave that cannot be a path here (a link loop, a name too long,
+    // a file where a folder must be, no permission) is bad input; the rest (I/O
+    // errors, a full disk) are runtime failures.
+    const int code = e.code().value();
+    const bool bad = code == ELOOP || code == ENAMETOOLONG || code == ENOTDIR || code == EACCES || code == EPERM ||
+                     code == EEXIST || code == EISDIR;
+    std::cerr << "demcal: error: cannot use " << (e.path1().empty() ? std::string("a path") : e.path1().string()) << ": "
+              << e.code().message() << "\n";
+    return bad ? kBadInput : kRuntime;
   } catch (const std::exception& e) {
     std::cerr << "demcal: error: " << e.what() << "\n";
     return kRuntime;

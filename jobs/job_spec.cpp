@@ -255,6 +255,9 @@ Job load_job_file(const std::string& path) {
   if (text.size() > kMaxJobFileBytes)
     throw JobError("", path + ": larger than " + std::to_string(kMaxJobFileBytes >> 20) +
                            " MiB, which no job file is (a grid is a list of values, not the values of every task)");
+  // JSON text has no NUL byte; a parser reading up to one would ignore the rest.
+  if (const auto nul = text.find('\0'); nul != std::string::npos)
+    throw JobError("", path + ": a NUL byte at offset " + std::to_string(nul) + ": a job file is JSON text");
   Job job = parse_job(text, path);
   // "<job>.refine<N>" is the name `demcal fit --refine` gives its rounds of <job>: a
   // job file of that name would be read as one of them (and break <job>'s fits).

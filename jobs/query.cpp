@@ -27,14 +27,6 @@ bool parse_number(const std::string& text, double& d) {
   return end && *end == '\0' && end != text.c_str();
 }
 
-bool value_matches(const nlohmann::json& v, const std::string& want) {
-  if (v.is_boolean()) return want == (v.get<bool>() ? "true" : "false");
-  if (v.is_string()) return v.get<std::string>() == want;
-  double d = 0.0;
-  if (v.is_number()) return parse_number(want, d) && numbers_equal(v.get<double>(), d);
-  return v.dump() == want;
-}
-
 nlohmann::json special(const db::TaskRow& t, const std::string& key) {
   if (key == "status") return t.status;
   if (key == "scene") return t.scene;
@@ -267,6 +259,15 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
 }
 
 }  // namespace
+
+bool value_matches(const nlohmann::json& v, const std::string& want) {
+  if (v.is_boolean()) return want == (v.get<bool>() ? "true" : "false");
+  if (v.is_string()) return v.get<std::string>() == want;
+  double d = 0.0;
+  if (v.is_number()) return parse_number(want, d) && numbers_equal(v.get<double>(), d);
+  return v.dump() == want;
+}
+
 
 Where parse_where(const std::string& text) {
   const auto eq = text.find('=');

@@ -15,6 +15,8 @@ struct Where {
 };
 // "theta_deg=30" -> {theta_deg, 30}; throws JobError("--where", ...) when malformed.
 Where parse_where(const std::string& text);
+// Whether a stored parameter value equals the text of a --where (numbers to 1e-12).
+bool value_matches(const nlohmann::json& v, const std::string& want);
 
 struct ResultRow {
   db::TaskRow task;

@@ -493,5 +493,30 @@ TEST(CalibrateRefine, DemRunnerAppendsASubJobThroughTheJobsRunner) {
   EXPECT_EQ(calibrate::base_jobs(s), std::vector<std::string>{"col"});
 }
 
+TEST(CalibrateRefine, ARefinementRunsOnlyTheValueAPinnedAxisWasFittedAt) {
+  // The fit read dt_factor = 0.1 only (--where): its refinement runs that value only,
+  // not every value of the axis (which would double its cost here).
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  nlohmann::json spec = {{"name", "pin"},
+                         {"scene", "collision"},
+                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
+                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
+                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"dt_factor", {0.1, 0.2}}}},
+                         {"seed", 1},
+                         {"threads", 1}};
+  jobs::RunOptions ro;
+  ro.workers = 2;
+  ro.out_dir = d.file("out");
+  std::ostringstream log;
+  ro.log = &log;
+  ASSERT_EQ(jobs::run_job(s, jobs::parse_job(spec.dump(), "test"), ro).done, 8);
+  const auto runner = calibrate::dem_point_runner(d.file("out"), 2, &log, {jobs::parse_where("dt_factor=0.1")});
+  runner(s, "pin", 1, {{15, 0.15}, {17.5, 0.175}});
+  const auto sub = s.tasks(calibrate::refine_job_name("pin", 1));
+  ASSERT_EQ(sub.size(), 4u);  // 2 theta x 2 eta, one dt_factor
+  for (const auto& t : sub) EXPECT_EQ(nlohmann::json::parse(t.params_json)["dt_factor"].get<double>(), 0.1);
+}
+
 }  // namespace
 }  // namespace demcal::test

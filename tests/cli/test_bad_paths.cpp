@@ -138,6 +138,11 @@ TEST(BadPaths, FilesThatCannotBeJobsAreRefused) {
   Result r = run_demcal({"validate", "/dev/zero"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("/dev/zero: larger than 16 MiB"), std::string::npos) << r.err;
+  // A NUL byte: everything after it would have been ignored.
+  write(d.file("nul.json"), collision_job("n", {0.1}) + std::string(1, '\0') + " {{{ garbage");
+  r = run_demcal({"validate", "nul.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("a NUL byte at offset"), std::string::npos) << r.err;
   // A stiffness that passes "> 0" but gives an infinite step.
   nlohmann::json j = nlohmann::json::parse(collision_job("soft", {0.1}));
   j["material"]["kn"] = 5e-324;
@@ -232,4 +237,20 @@ TEST(BadPaths, AStudyWhoseFoldersCannotBeMadeMakesNoDatabase) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--out: cannot create the folder o/tasks"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.file("n.db")));
+}
+
+TEST(BadPaths, ALinkLoopOrANameTooLongIsBadInputNamingThePath) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("small", {0.1}));
+  fs::create_symlink("loop2", d.path / "loop1");
+  fs::create_symlink("loop1", d.path / "loop2");
+  Result r = run_demcal({"status", "--db", "loop1"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("cannot use loop1: Too many levels of symbolic links"), std::string::npos) << r.err;
+  r = run_demcal({"run", "j.json", "--db", "x.db", "--out", "loop1"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("x.db")));
+  r = run_demcal({"status", "--db", std::string(5000, 'a') + ".db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("File name too long"), std::string::npos) << r.err.substr(0, 200);
 }
