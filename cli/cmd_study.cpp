@@ -44,9 +44,7 @@ std::pair<std::string, double> parse_reference(const std::string& text) {
   }
 }
 
-int fidelity(const StudyArgs& a, jobs::StudyOptions o) {
-  for (const auto& r : a.references) o.reference.insert(parse_reference(r));
-  jobs::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
+int fidelity(const StudyArgs& a, const jobs::StudyOptions& o) {
   db::Store store(a.db);
   const jobs::FidelityStudy s = jobs::run_fidelity_study(store, a.name, o);
   std::cout << "study " << s.name << " (" << s.scene << "), baseline " << s.baseline << "; " << s.replicas
@@ -101,6 +99,12 @@ int study(const StudyArgs& a) {
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  if (is_fidelity(a.name)) {
+    for (const auto& r : a.references)
+      if (!o.reference.insert(parse_reference(r)).second)
+        throw jobs::JobError("--reference", "\"" + r + "\": a second reference for the same knob; give one");
+    jobs::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
+  }
   const std::string flag = a.out.empty() ? "--db" : "--out";
   require_writable_dir(flag, o.out_dir);  // before the database is written
   // The folders the study writes into made now, and the database checked, before the

@@ -525,6 +525,10 @@ std::vector<KnobDef> selected_knobs(const FidelityDef& d, const StudyOptions& o)
                                         knob_list(d) + ")");
     if (!(v > 0) || !std::isfinite(v))
       throw JobError("--reference", "the reference for " + def->name + " must be a positive number");
+    // Two names of one knob (rate and strain_rate): which one would count is not the user's to guess.
+    for (const auto& [k2, v2] : o.reference)
+      if (k2 < k && find_knob(d, k2) == def)
+        throw JobError("--reference", k2 + " and " + k + " both name the knob " + def->name + "; give one reference");
   }
   std::vector<std::string> want;
   for (const auto& n : o.knobs) {
@@ -534,6 +538,10 @@ std::vector<KnobDef> selected_knobs(const FidelityDef& d, const StudyOptions& o)
                                     knob_list(d) + ")");
     want.push_back(def->name);
   }
+  // A reference for a knob the study leaves out would be ignored without a word.
+  for (const auto& [k, v] : o.reference)
+    if (!want.empty() && std::find(want.begin(), want.end(), find_knob(d, k)->name) == want.end())
+      throw JobError("--reference", k + " is not among the knobs this study varies (--knobs)");
   std::vector<KnobDef> out;
   for (KnobDef k : d.knobs) {
     if (!want.empty() && std::find(want.begin(), want.end(), k.name) == want.end()) continue;

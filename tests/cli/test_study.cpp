@@ -155,4 +155,19 @@ TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--reference: dt = 1e+09: must be in (0, 10]"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.path / "demcal.db"));
+  // References that would be resolved silently: two for one knob (under one name or
+  // two), and one for a knob the study leaves out.
+  for (const std::vector<std::string>& refs :
+       {std::vector<std::string>{"particles=150", "particles=300"}, {"rate=1e-2", "strain_rate=3e-3"}}) {
+    std::vector<std::string> args = {"study", "fidelity", "--quick"};
+    for (const auto& x : refs) args.insert(args.end(), {"--reference", x});
+    r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 2) << refs[1];
+    EXPECT_NE(r.err.find("--reference"), std::string::npos) << r.err;
+  }
+  r = run_demcal({"study", "fidelity", "--quick", "--knobs", "particles", "--reference", "density=1e30"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("density is not among the knobs this study varies"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "demcal.db"));
+  EXPECT_FALSE(fs::exists(d.path / "demcal-out"));  // nor a folder
 }
