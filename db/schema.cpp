@@ -1,5 +1,7 @@
 #include "schema.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sys/stat.h>
@@ -80,7 +82,7 @@ bool file_is_empty_or_missing(const std::string& path) {
 
 void check_header(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw DbError("cannot read database " + path, true);
+  if (!in) throw DbError("cannot read database " + path + ": " + std::strerror(errno), true);
   char head[16] = {};
   in.read(head, sizeof head);
   if (in.gcount() != 16 || std::string(head, 16) != std::string("SQLite format 3\0", 16))

@@ -91,6 +91,10 @@ chmod 755 "$T/outs2/ro"  # the job's folder, root's
 chmod 777 "$T/mine"
 expect 2 "cannot write into the output folder" -- run "$T/j.json" --db "$T/mine/n.db" --out "$T/outs2"
 [[ ! -e "$T/mine/n.db" ]] || { echo "FAIL: a run refused for its output folder made its database"; fail=1; }
+# A database nobody may read at all: the reason is in the message.
+cp "$T/shut/x.db" "$T/mine/z.db"
+chmod 000 "$T/mine/z.db"
+expect 2 "Permission denied" -- status --db "$T/mine/z.db"
 [[ $(md5sum < "$T/shut/x.db") == "$sum" ]] || { echo "FAIL: the read-only database changed"; fail=1; }
 left=$(ls "$T/shut")
 [[ "$left" == "x.db" ]] || { echo "FAIL: files left in the read-only folder: $left"; fail=1; }
