@@ -3,9 +3,9 @@
 #include "db/schema.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/part_file.hpp"
 #include "jobs/shard.hpp"
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -41,6 +41,10 @@ fs::path parts_folder(const SlurmArgs& a) {
   return a.parts.empty() ? fs::absolute(a.db).parent_path() / "parts" : fs::absolute(a.parts);
 }
 
+// The script's first two lines: refuse_to_overwrite knows an earlier script by them.
+constexpr const char* kShebang = "#!/usr/bin/env bash";
+constexpr const char* kHeader = "# SLURM array job for demcal job";
+
 std::string script(const SlurmArgs& a, const jobs::Job& job) {
   // Absolute: the script changes into the database's folder before running it.
   const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
@@ -49,8 +53,8 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
   const fs::path parts = parts_folder(a);
   const std::string n = std::to_string(a.array);
   std::ostringstream s;
-  s << "#!/usr/bin/env bash\n"
-    << "# SLURM array job for demcal job \"" << job.name << "\": " << job.tasks.size() << " task(s) in " << n
+  s << kShebang << "\n"
+    << kHeader << " \"" << job.name << "\": " << job.tasks.size() << " task(s) in " << n
     << " shard(s), then a merge.\n"
     << "# Written by `demcal slurm`. Submit both steps with:   bash " << (a.out.empty() ? "THIS_SCRIPT" : a.out) << "\n"
     << "#   shard i (array element i, 1-based) runs the tasks whose index k has k mod " << n << " = i-1\n"
@@ -115,8 +119,7 @@ void refuse_to_overwrite(const SlurmArgs& a) {
   std::string first, second;
   std::getline(in, first);
   std::getline(in, second);
-  if (!fs::is_regular_file(a.out, ec) || first != "#!/usr/bin/env bash" ||
-      second.rfind("# SLURM array job for demcal job", 0) != 0)
+  if (!fs::is_regular_file(a.out, ec) || first != kShebang || second.rfind(kHeader, 0) != 0)
     throw jobs::JobError("--out", a.out + " exists and is not a script demcal wrote; choose another name or remove it");
 }
 
@@ -146,21 +149,15 @@ int slurm(SlurmArgs a) {
   refuse_to_overwrite(a);
   const std::string text = script(a, job);
   // Written beside its name and renamed: a failed write leaves an earlier script whole.
-  const std::string part = a.out + ".part";
+  jobs::PartFile file(a.out);
   {
-    std::ofstream f(part, std::ios::trunc);
+    std::ofstream f(file.part(), std::ios::trunc);
     f << text;
     f.close();
-    if (!f) {
-      std::remove(part.c_str());
-      throw std::runtime_error("cannot write " + a.out);
-    }
+    if (!f) throw std::runtime_error("cannot write " + a.out);
   }
-  ::chmod(part.c_str(), 0755);
-  if (std::rename(part.c_str(), a.out.c_str()) != 0) {
-    std::remove(part.c_str());
-    throw std::runtime_error("cannot write " + a.out);
-  }
+  ::chmod(file.part().c_str(), 0755);
+  file.commit("batch script");
   std::cout << "wrote " << a.out << ": " << job.tasks.size() << " task(s) of job " << job.name << " in " << a.array
             << " shard(s) plus a merge into " << fs::absolute(a.db).string() << "\nsubmit with: bash " << a.out << "\n";
   if (static_cast<std::size_t>(a.array) > job.tasks.size())
