@@ -8,6 +8,7 @@
 #include <cmath>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -278,10 +279,76 @@ std::vector<RefinePoint> refine_points(const ResponseSurface& rs, double theta, 
   return {{tc, ec}, {tn, ec}, {tc, en}, {tn, en}};
 }
 
+namespace {
+
+std::set<std::string> fitted_jobs(const Calibration& cal) {
+  std::set<std::string> js;
+  for (const auto& m : cal.models) js.insert(m.job);
+  return js;
+}
+
+int unfinished_tasks(db::Store& store, const std::string& job) {
+  int n = 0;
+  const db::StatusCounts all = store.counts(job);
+  const auto it = all.find(job);
+  if (it == all.end()) return 0;
+  for (const auto& [status, count] : it->second)
+    if (status != "done" && status != "failed") n += count;
+  return n;
+}
+
+double move_of(const Calibration& cal, double theta0, double eta0) {
+  const Box& b = cal.result.box;
+  return std::max(std::abs(cal.result.theta - theta0) / (b.theta_hi - b.theta_lo),
+                  std::abs(cal.result.eta - eta0) / (b.eta_hi - b.eta_lo));
+}
+
+// The last stored round of every fitted job, finished where its runs were cut short
+// (an interrupt, a lost worker); returns that round's record, or none if nothing ran.
+std::optional<RefineRound> resume_last_round(db::Store& store, const FitRequest& req, Calibration& cal,
+                                             const RefineOptions& opt, std::ostream& log) {
+  if (!opt.resume_round) return std::nullopt;
+  RefineRound rec;
+  rec.resumed = true;
+  const double th0 = cal.result.theta, et0 = cal.result.eta;
+  nlohmann::json resumed = nlohmann::json::array();
+  for (const auto& job : fitted_jobs(cal)) {
+    const auto subs = refine_jobs_of(store, job);
+    if (subs.empty()) continue;
+    const int open = unfinished_tasks(store, subs.back());
+    if (open == 0) continue;
+    log << "refine: resuming round " << refine_round(subs.back()) << " of job " << job << " (" << open
+        << " run(s) unfinished)\n";
+    opt.resume_round(store, subs.back());
+    rec.round = std::max(rec.round, refine_round(subs.back()));
+    resumed.push_back(subs.back());
+  }
+  if (resumed.empty()) return std::nullopt;
+  cal = calibrate(store, req);
+  rec.ok = cal.result.ok;
+  rec.theta = cal.result.theta;
+  rec.eta = cal.result.eta;
+  rec.move = cal.result.ok ? move_of(cal, th0, et0) : kNaN;
+  rec.fit_id = store_fit(store, req, cal, rec.round, {{"refine", {{"resumed", resumed}}}});
+  log << "refine round " << rec.round << " (resumed): candidate theta = " << rec.theta << ", eta = " << rec.eta
+      << " (fit " << rec.fit_id << ")\n";
+  return rec;
+}
+
+}  // namespace
+
 std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibration& cal, const RefineOptions& opt) {
   std::vector<RefineRound> rounds;
   std::ostream& log = opt.log ? *opt.log : std::cerr;
-  for (int r = 1; r <= opt.rounds; ++r) {
+  if (cal.result.ok)
+    if (auto r = resume_last_round(store, req, cal, opt, log)) rounds.push_back(*r);
+  // Numbered on from the last stored round of any fitted job: a job is its latest
+  // spec, so reusing a round's name would drop that round's runs from the surfaces.
+  int last = 0;
+  for (const auto& job : fitted_jobs(cal))
+    for (const auto& sub : refine_jobs_of(store, job)) last = std::max(last, refine_round(sub));
+  for (int k = 1; k <= opt.rounds; ++k) {
+    const int r = last + k;
     if (!cal.result.ok) {
       log << "refine: stopping before round " << r << ": the current fit has no answer\n";
       break;
@@ -289,10 +356,10 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
     const double th0 = cal.result.theta, et0 = cal.result.eta;
     RefineRound rec;
     rec.round = r;
-    rec.points = refine_points(cal.surfaces.front(), th0, et0, r);
-    std::set<std::string> js;
-    for (const auto& m : cal.models) js.insert(m.job);
-    for (const auto& job : js) {
+    // The spacing halves with each round of this invocation, from the grid's own:
+    // the candidate of an earlier invocation (other targets, a grown grid) may be far.
+    rec.points = refine_points(cal.surfaces.front(), th0, et0, k);
+    for (const auto& job : fitted_jobs(cal)) {
       log << "refine round " << r << ": running " << rec.points.size() << " point(s) around theta = " << th0
           << ", eta = " << et0 << " for job " << job << "\n";
       opt.run_points(store, job, r, rec.points);
@@ -301,8 +368,7 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
     rec.ok = cal.result.ok;
     rec.theta = cal.result.theta;
     rec.eta = cal.result.eta;
-    const Box& b = cal.result.box;
-    rec.move = std::max(std::abs(rec.theta - th0) / (b.theta_hi - b.theta_lo), std::abs(rec.eta - et0) / (b.eta_hi - b.eta_lo));
+    rec.move = move_of(cal, th0, et0);
     nlohmann::json pts = nlohmann::json::array();
     for (const auto& p : rec.points) pts.push_back({p.theta, p.eta});
     rec.fit_id = store_fit(store, req, cal, r, {{"refine", {{"points", pts}, {"move", rec.move}, {"tolerance", opt.tolerance}}}});
@@ -313,6 +379,11 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
   }
   return rounds;
 }
+
+namespace {
+const char* const kRefineInterrupted =
+    "refinement interrupted; finished runs are kept, and `demcal fit` with --refine again finishes the round first";
+}  // namespace
 
 PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log,
                              const std::vector<jobs::Where>& where) {
@@ -346,7 +417,22 @@ PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostre
     ro.out_dir = out_dir;
     ro.log = log ? log : &std::cerr;
     const jobs::RunSummary s = jobs::run_job(store, sub, ro);
-    if (s.interrupted) throw std::runtime_error("refinement interrupted; finished runs are kept");
+    if (s.interrupted) throw std::runtime_error(kRefineInterrupted);
+    if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
+  };
+}
+
+RoundResumer dem_round_resumer(const std::string& out_dir, int workers, std::ostream* log) {
+  return [out_dir, workers, log](db::Store& store, const std::string& sub_job) {
+    const auto text = store.job_spec(sub_job);
+    if (!text) throw JobError("--job", "no job named \"" + sub_job + "\"");
+    const jobs::Job sub = jobs::parse_job(*text, "refinement " + sub_job);
+    jobs::RunOptions ro;
+    ro.workers = workers;
+    ro.out_dir = out_dir;
+    ro.log = log ? log : &std::cerr;
+    const jobs::RunSummary s = jobs::run_job(store, sub, ro);
+    if (s.interrupted) throw std::runtime_error(kRefineInterrupted);
     if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
   };
 }

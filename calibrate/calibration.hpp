@@ -50,22 +50,28 @@ std::int64_t store_fit(db::Store& store, const FitRequest& request, const Calibr
                        const nlohmann::json& extra = nlohmann::json::object());
 
 // Refinement: DEM runs at the candidate and a few neighbours, appended as the
-// job's sub-job <job>.refine<round>; `run_points` does the running.
+// job's sub-job <job>.refine<round>; `run_points` does the running. Rounds are
+// numbered on from the last one stored, so a later `fit --refine` adds to the
+// earlier rounds instead of replacing them; `resume_round` finishes a stored round
+// whose runs were interrupted.
 struct RefinePoint {
   double theta, eta;
 };
 using PointRunner = std::function<void(db::Store& store, const std::string& job, int round, const std::vector<RefinePoint>& points)>;
+using RoundResumer = std::function<void(db::Store& store, const std::string& sub_job)>;
 
 struct RefineOptions {
-  int rounds = 0;
+  int rounds = 0;           // new rounds to run
   double tolerance = 0.02;  // stop when the candidate moves less than this fraction of the grid range on both axes
   PointRunner run_points;
+  RoundResumer resume_round;  // unset: an unfinished stored round is left as it is
   std::ostream* log = nullptr;
 };
 
 struct RefineRound {
   int round = 0;
-  std::vector<RefinePoint> points;
+  bool resumed = false;             // a stored round finished, not a new one
+  std::vector<RefinePoint> points;  // empty for a resumed round
   double theta = kNaN, eta = kNaN, move = kNaN;  // candidate after the round; move in fractions of the range
   bool ok = false;
   std::int64_t fit_id = 0;
@@ -75,8 +81,10 @@ struct RefineRound {
 // grid spacing / 2^round towards the inside of the box.
 std::vector<RefinePoint> refine_points(const ResponseSurface& rs, double theta, double eta, int round);
 
-// Runs rounds until the candidate moves less than the tolerance, a fit fails, or
-// `rounds` is reached; `cal` holds the last calibration. Each round's fit is stored.
+// Finishes the last stored round of any of the fit's jobs that has unfinished runs,
+// then runs new rounds until the candidate moves less than the tolerance, a fit
+// fails, or `rounds` is reached; `cal` holds the last calibration. Each round's fit
+// is stored.
 std::vector<RefineRound> refine(db::Store& store, const FitRequest& request, Calibration& cal, const RefineOptions& options);
 
 // The real runner: a sub-job of `job` whose grid is the points' theta x eta values
@@ -84,5 +92,8 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& request, Cal
 // alone, as the fit read only them), run by jobs::run_job into the store.
 PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log,
                              const std::vector<jobs::Where>& where = {});
+// The real resumer: runs the sub-job's stored spec again, which runs only its
+// unfinished tasks.
+RoundResumer dem_round_resumer(const std::string& out_dir, int workers, std::ostream* log);
 
 }  // namespace demcal::calibrate

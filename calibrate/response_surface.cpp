@@ -110,6 +110,15 @@ bool is_refine_job(const std::string& name) {
   return std::all_of(name.begin() + static_cast<long>(at) + 7, name.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
+int refine_round(const std::string& name) {
+  if (!is_refine_job(name)) return 0;
+  // The round number as refine_job_name writes it; a longer run of digits (a job
+  // of some other origin) is no round of ours.
+  const std::string digits = name.substr(name.rfind(".refine") + 7);
+  if (digits.size() > 6 || digits[0] == '0') return 0;
+  return std::stoi(digits);
+}
+
 std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job) {
   std::vector<std::pair<int, std::string>> found;
   const std::string prefix = job + ".refine";
@@ -117,11 +126,8 @@ std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job
     (void)counts;
     if (name.rfind(prefix, 0) != 0 || !is_refine_job(name) || name.find('.', prefix.size()) != std::string::npos)
       continue;
-    // The round number as refine_job_name writes it; a longer run of digits (a job
-    // of some other origin) is no round of ours.
-    const std::string digits = name.substr(prefix.size());
-    if (digits.size() > 6) continue;
-    found.emplace_back(std::stoi(digits), name);
+    const int round = refine_round(name);
+    if (round > 0) found.emplace_back(round, name);
   }
   std::sort(found.begin(), found.end());
   std::vector<std::string> out;

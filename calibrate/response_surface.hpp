@@ -72,7 +72,10 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
 // Refinement rounds of job J are stored as jobs named J.refine<k>.
 std::string refine_job_name(const std::string& job, int round);
 bool is_refine_job(const std::string& name);
+// J's refinement sub-jobs, by round.
 std::vector<std::string> refine_jobs_of(db::Store& store, const std::string& job);
+// The round a sub-job name carries (J.refine3 -> 3); 0 for any other name.
+int refine_round(const std::string& name);
 // Jobs that are not refinement sub-jobs, by name.
 std::vector<std::string> base_jobs(db::Store& store);
 

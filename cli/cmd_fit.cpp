@@ -120,6 +120,7 @@ void add_fit(CLI::App& app, int& exit_code) {
         ro.rounds = a->refine;
         ro.log = &std::cerr;
         ro.run_points = calibrate::dem_point_runner(out_dir, a->workers, &std::cerr, req.where);
+        ro.resume_round = calibrate::dem_round_resumer(out_dir, a->workers, &std::cerr);
         rounds = calibrate::refine(store, req, cal, ro);
         if (!rounds.empty()) id = rounds.back().fit_id;
       }
@@ -131,8 +132,10 @@ void add_fit(CLI::App& app, int& exit_code) {
       } else {
         print_fit(std::cout, cal, id);
         for (const auto& r : rounds)
-          std::cout << "refine round " << r.round << ": " << r.points.size() << " run(s); candidate theta = " << g(r.theta)
-                    << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 3) << "% of the range (fit " << r.fit_id << ")\n";
+          std::cout << "refine round " << r.round << ": "
+                    << (r.resumed ? std::string("resumed") : std::to_string(r.points.size()) + " run(s)")
+                    << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 3)
+                    << "% of the range (fit " << r.fit_id << ")\n";
       }
       if (!cal.result.ok) {
         std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";

@@ -8,10 +8,13 @@
 
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/query.hpp"
 #include "jobs/runner.hpp"
+#include "jobs/shard.hpp"
 
 #include <gtest/gtest.h>
 
+#include <set>
 #include <sstream>
 
 namespace demcal::test {
@@ -461,6 +464,144 @@ TEST(CalibrateRefine, RoundsConvergeOnTheTruthAndAreRecorded) {
   for (const auto& p : rs.points) refine_points += p.refine;
   EXPECT_GT(refine_points, 0);
   EXPECT_EQ(rs.thetas.size(), 4u);  // the job's own axes are unchanged
+}
+
+// A fake DEM: the points' theta x eta grid stored as the round's sub-job.
+calibrate::PointRunner fake_point_runner(std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>>& calls) {
+  return [&calls](db::Store& st, const std::string& job, int round, const std::vector<calibrate::RefinePoint>& pts) {
+    calls.emplace_back(round, pts);
+    std::set<double> ths, ets;
+    for (const auto& p : pts) ths.insert(p.theta), ets.insert(p.eta);
+    store_fake_job(st, calibrate::refine_job_name(job, round), {ths.begin(), ths.end()}, {ets.begin(), ets.end()}, 1,
+                   0.0, 1);
+  };
+}
+
+bool has_point(const calibrate::ResponseSurface& rs, double th, double et) {
+  return std::any_of(rs.points.begin(), rs.points.end(),
+                     [&](const calibrate::GridPoint& p) { return p.theta == th && p.eta == et && !p.hole(); });
+}
+
+TEST(CalibrateRefine, ALaterInvocationNumbersOnAndKeepsTheEarlierRounds) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+  calibrate::FitRequest req;
+  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
+  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
+  std::ostringstream log;
+  calibrate::RefineOptions ro;
+  ro.rounds = 1;
+  ro.tolerance = 0;  // every asked round runs
+  ro.log = &log;
+  ro.run_points = fake_point_runner(calls);
+  calibrate::Calibration cal = calibrate::calibrate(s, req);
+  ASSERT_EQ(calibrate::refine(s, req, cal, ro).size(), 1u);
+  // Another invocation, other targets: its round is 2, and round 1 stays in the job.
+  req.targets = {{"phi_peak", phi_peak_fn(38.0, 0.45)}, {"phi_cv", phi_cv_fn(38.0, 0.45)}};
+  cal = calibrate::calibrate(s, req);
+  const auto second = calibrate::refine(s, req, cal, ro);
+  ASSERT_EQ(second.size(), 1u);
+  EXPECT_EQ(second[0].round, 2);
+  EXPECT_FALSE(second[0].resumed);
+  ASSERT_EQ(calls.size(), 2u);
+  EXPECT_EQ(calls[0].first, 1);
+  EXPECT_EQ(calls[1].first, 2);
+  EXPECT_EQ(calibrate::refine_jobs_of(s, "coarse"), (std::vector<std::string>{"coarse.refine1", "coarse.refine2"}));
+  const auto rs = calibrate::gather(s, "coarse", "phi_peak");
+  for (const auto& call : calls)
+    for (const auto& p : call.second) EXPECT_TRUE(has_point(rs, p.theta, p.eta)) << p.theta << ", " << p.eta;
+  // The second invocation's spacing starts again from the grid's / 2 (10 deg / 2).
+  std::set<double> ths;
+  for (const auto& p : calls[1].second) ths.insert(p.theta);
+  ASSERT_EQ(ths.size(), 2u);
+  EXPECT_NEAR(*ths.rbegin() - *ths.begin(), 5.0, 1e-3);
+  EXPECT_EQ(nlohmann::json::parse(s.fits().back().result_json)["round"], 2);
+}
+
+TEST(CalibrateRefine, AnUnfinishedRoundIsFinishedBeforeNewOnes) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+  // Round 1 of an earlier invocation, cut short: one of its four runs never ran.
+  store_fake_job(s, "coarse.refine1", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
+  calibrate::FitRequest req;
+  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
+  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
+  std::vector<std::string> resumed;
+  std::ostringstream log;
+  calibrate::RefineOptions ro;
+  ro.rounds = 1;
+  ro.tolerance = 0;
+  ro.log = &log;
+  ro.run_points = fake_point_runner(calls);
+  ro.resume_round = [&](db::Store& st, const std::string& sub) {
+    resumed.push_back(sub);
+    for (const auto& t : st.tasks(sub)) {
+      if (t.status != "pending") continue;
+      ASSERT_TRUE(st.claim(t.id, "test"));
+      const auto p = nlohmann::json::parse(t.params_json);
+      db::Outcome o;
+      o.status = "done";
+      o.metrics = {{"phi_peak_deg", phi_peak_fn(p["theta_deg"], p["eta"])}, {"phi_cv_deg", phi_cv_fn(p["theta_deg"], p["eta"])}};
+      st.finish(t.id, "test", o);
+    }
+  };
+  calibrate::Calibration cal = calibrate::calibrate(s, req);
+  const auto rounds = calibrate::refine(s, req, cal, ro);
+  EXPECT_EQ(resumed, std::vector<std::string>{"coarse.refine1"});
+  ASSERT_EQ(rounds.size(), 2u) << log.str();
+  EXPECT_TRUE(rounds[0].resumed);
+  EXPECT_EQ(rounds[0].round, 1);
+  EXPECT_TRUE(rounds[0].points.empty());
+  EXPECT_EQ(rounds[1].round, 2);
+  ASSERT_EQ(calls.size(), 1u);
+  EXPECT_EQ(calls[0].first, 2);
+  EXPECT_TRUE(has_point(calibrate::gather(s, "coarse", "phi_peak"), 35, 0.3));
+  const auto fits = s.fits();
+  ASSERT_EQ(fits.size(), 2u);
+  const auto first = nlohmann::json::parse(fits[0].result_json);
+  EXPECT_EQ(first["round"], 1);
+  EXPECT_EQ(first["refine"]["resumed"], nlohmann::json::array({"coarse.refine1"}));
+  EXPECT_NE(log.str().find("resuming round 1 of job coarse (1 run(s) unfinished)"), std::string::npos) << log.str();
+  // A finished round is not resumed again.
+  resumed.clear();
+  cal = calibrate::calibrate(s, req);
+  calibrate::refine(s, req, cal, ro);
+  EXPECT_TRUE(resumed.empty());
+  EXPECT_EQ(calls.back().first, 3);
+}
+
+TEST(CalibrateRefine, DemRoundResumerRunsOnlyTheRoundsUnfinishedTasks) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  nlohmann::json spec = {{"name", "col.refine1"},
+                         {"scene", "collision"},
+                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
+                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
+                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}}},
+                         {"seed", 1},
+                         {"threads", 1}};
+  std::ostringstream log;
+  // Recorded, as a run does before its first task, and then cut off with one task done.
+  const jobs::Job job = jobs::parse_job(spec.dump(), "test");
+  jobs::record_job(s, job, jobs::Shard{}, log);
+  auto tasks = s.tasks("col.refine1");
+  ASSERT_EQ(tasks.size(), 4u);
+  ASSERT_TRUE(s.claim(tasks[0].id, "earlier"));
+  db::Outcome o;
+  o.status = "done";
+  o.metrics = {{"marker", 42.0}};
+  s.finish(tasks[0].id, "earlier", o);
+  calibrate::dem_round_resumer(d.file("out"), 2, &log)(s, "col.refine1");
+  tasks = s.tasks("col.refine1");
+  for (const auto& t : tasks) EXPECT_EQ(t.status, "done") << log.str();
+  // The task done before stays as it was: only the three others ran.
+  const auto rows = jobs::select_rows(s, "col.refine1", {});
+  int markers = 0;
+  for (const auto& r : rows)
+    markers += std::any_of(r.metrics.begin(), r.metrics.end(), [](const auto& m) { return m.first == "marker"; });
+  EXPECT_EQ(markers, 1);
 }
 
 TEST(CalibrateRefine, DemRunnerAppendsASubJobThroughTheJobsRunner) {
