@@ -381,8 +381,21 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
 }
 
 namespace {
-const char* const kRefineInterrupted =
-    "refinement interrupted; finished runs are kept, and `demcal fit` with --refine again finishes the round first";
+
+// A round's sub-job through the jobs runner: an interrupt ends the refinement, a
+// failed run leaves a hole.
+void run_round(db::Store& store, const jobs::Job& sub, const std::string& out_dir, int workers, std::ostream* log) {
+  jobs::RunOptions ro;
+  ro.workers = workers;
+  ro.out_dir = out_dir;
+  ro.log = log ? log : &std::cerr;
+  const jobs::RunSummary s = jobs::run_job(store, sub, ro);
+  if (s.interrupted)
+    throw std::runtime_error(
+        "refinement interrupted; finished runs are kept, and `demcal fit` with --refine again finishes the round first");
+  if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
+}
+
 }  // namespace
 
 PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostream* log,
@@ -411,14 +424,7 @@ PointRunner dem_point_runner(const std::string& out_dir, int workers, std::ostre
       spec["material"].erase("theta_deg");
       spec["material"].erase("eta");
     }
-    const jobs::Job sub = jobs::parse_job(spec.dump(), "refinement of job " + job);
-    jobs::RunOptions ro;
-    ro.workers = workers;
-    ro.out_dir = out_dir;
-    ro.log = log ? log : &std::cerr;
-    const jobs::RunSummary s = jobs::run_job(store, sub, ro);
-    if (s.interrupted) throw std::runtime_error(kRefineInterrupted);
-    if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
+    run_round(store, jobs::parse_job(spec.dump(), "refinement of job " + job), out_dir, workers, log);
   };
 }
 
@@ -426,14 +432,7 @@ RoundResumer dem_round_resumer(const std::string& out_dir, int workers, std::ost
   return [out_dir, workers, log](db::Store& store, const std::string& sub_job) {
     const auto text = store.job_spec(sub_job);
     if (!text) throw JobError("--job", "no job named \"" + sub_job + "\"");
-    const jobs::Job sub = jobs::parse_job(*text, "refinement " + sub_job);
-    jobs::RunOptions ro;
-    ro.workers = workers;
-    ro.out_dir = out_dir;
-    ro.log = log ? log : &std::cerr;
-    const jobs::RunSummary s = jobs::run_job(store, sub, ro);
-    if (s.interrupted) throw std::runtime_error(kRefineInterrupted);
-    if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
+    run_round(store, jobs::parse_job(*text, "refinement " + sub_job), out_dir, workers, log);
   };
 }
 

@@ -466,6 +466,18 @@ TEST(CalibrateRefine, RoundsConvergeOnTheTruthAndAreRecorded) {
   EXPECT_EQ(rs.thetas.size(), 4u);  // the job's own axes are unchanged
 }
 
+// A small collision job over (theta, eta, ...): milliseconds a task, enough to run
+// refinement rounds through the real jobs runner.
+nlohmann::json small_collision_job(const std::string& name, const nlohmann::json& grid) {
+  return {{"name", name},
+          {"scene", "collision"},
+          {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
+          {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
+          {"grid", grid},
+          {"seed", 1},
+          {"threads", 1}};
+}
+
 // A fake DEM: the points' theta x eta grid stored as the round's sub-job.
 calibrate::PointRunner fake_point_runner(std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>>& calls) {
   return [&calls](db::Store& st, const std::string& job, int round, const std::vector<calibrate::RefinePoint>& pts) {
@@ -575,13 +587,7 @@ TEST(CalibrateRefine, AnUnfinishedRoundIsFinishedBeforeNewOnes) {
 TEST(CalibrateRefine, DemRoundResumerRunsOnlyTheRoundsUnfinishedTasks) {
   TempDir d;
   db::Store s(d.file("demcal.db"));
-  nlohmann::json spec = {{"name", "col.refine1"},
-                         {"scene", "collision"},
-                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
-                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
-                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}}},
-                         {"seed", 1},
-                         {"threads", 1}};
+  const nlohmann::json spec = small_collision_job("col.refine1", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}});
   std::ostringstream log;
   // Recorded, as a run does before its first task, and then cut off with one task done.
   const jobs::Job job = jobs::parse_job(spec.dump(), "test");
@@ -608,13 +614,7 @@ TEST(CalibrateRefine, DemRunnerAppendsASubJobThroughTheJobsRunner) {
   TempDir d;
   const std::string db = d.file("demcal.db");
   db::Store s(db);
-  nlohmann::json spec = {{"name", "col"},
-                         {"scene", "collision"},
-                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
-                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
-                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}}},
-                         {"seed", 1},
-                         {"threads", 1}};
+  const nlohmann::json spec = small_collision_job("col", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}});
   const jobs::Job job = jobs::parse_job(spec.dump(), "test");
   jobs::RunOptions ro;
   ro.workers = 2;
@@ -639,13 +639,7 @@ TEST(CalibrateRefine, ARefinementRunsOnlyTheValueAPinnedAxisWasFittedAt) {
   // not every value of the axis (which would double its cost here).
   TempDir d;
   db::Store s(d.file("demcal.db"));
-  nlohmann::json spec = {{"name", "pin"},
-                         {"scene", "collision"},
-                         {"material", {{"kn", 3e7}, {"diameter", {{"min", 0.001}, {"max", 0.002}}}}},
-                         {"collision", {{"particles", 20}, {"steps", 100}, {"sample_every", 20}}},
-                         {"grid", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"dt_factor", {0.1, 0.2}}}},
-                         {"seed", 1},
-                         {"threads", 1}};
+  const nlohmann::json spec = small_collision_job("pin", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"dt_factor", {0.1, 0.2}}});
   jobs::RunOptions ro;
   ro.workers = 2;
   ro.out_dir = d.file("out");
