@@ -92,6 +92,33 @@ std::string few_grains_moving(const Particles& p, const std::vector<std::uint8_t
   return os.str();
 }
 
+// How far the heap moved over the collapse series' rows from time `from` on, read
+// from their front and angle columns. Not judged when the window would start
+// before `earliest` or a row in it has no angle (no heap to fit yet).
+struct HeapStillness {
+  bool judged = false;
+  double angle_change_deg = 0, front_change_m = 0;
+};
+HeapStillness heap_stillness(const Series& energy, double from, double earliest) {
+  HeapStillness h;
+  if (from < earliest) return h;
+  const std::size_t t = energy.column("time"), f = energy.column("front_x"), a = energy.column("repose_deg");
+  double a_lo = INFINITY, a_hi = -INFINITY, f_lo = INFINITY, f_hi = -INFINITY;
+  int rows = 0;
+  for (const auto& row : energy.rows) {
+    if (row[t] < from) continue;
+    if (!std::isfinite(row[a])) return h;
+    a_lo = std::min(a_lo, row[a]), a_hi = std::max(a_hi, row[a]);
+    f_lo = std::min(f_lo, row[f]), f_hi = std::max(f_hi, row[f]);
+    ++rows;
+  }
+  if (rows < 2) return h;
+  h.judged = true;
+  h.angle_change_deg = a_hi - a_lo;
+  h.front_change_m = f_hi - f_lo;
+  return h;
+}
+
 Wall make_wall(const std::string& name, const Vec3& point, const Vec3& normal, bool rough) {
   Wall w;
   w.name = name;
@@ -162,6 +189,8 @@ void ReposeConfig::validate() const {
   non_negative(collapse_drag, "repose.collapse_drag");
   if (!(rest_trim >= 0.0 && rest_trim <= 0.1)) throw ConfigError("repose.rest_trim", "must lie in [0, 0.1]");
   if (rest_samples < 1) throw ConfigError("repose.rest_samples", "must be at least 1");
+  non_negative(rest_profile_window, "repose.rest_profile_window");
+  positive(rest_profile_tol_deg, "repose.rest_profile_tol_deg");
   non_negative(min_collapse_time, "repose.min_collapse_time");
   positive(time_limit, "repose.time_limit");
   positive(sample_interval, "repose.sample_interval");
@@ -249,6 +278,7 @@ Metrics ReposeResult::metrics() const {
                  {"front_m", front_m},
                  {"final_height_m", final_height_m},
                  {"time_to_rest_s", time_to_rest_s},
+                 {"rest_by_profile", rest_by_profile ? 1.0 : 0.0},
                  {"reached_end_wall", reached_end_wall ? 1.0 : 0.0}};
     if (!std::isfinite(repose_deg)) {  // no fit: no angle, no error, no halves, no steepest
       static const std::set<std::string> of_the_fit = {"repose_deg",       "repose_fit_err_deg", "steepest_deg",
@@ -265,8 +295,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   const auto t_start = std::chrono::steady_clock::now();
   ReposeResult res;
   res.energy.name = "energy";
-  res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x"};
-  res.energy.units = {"s", "J", "J", "J", "m"};
+  res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x", "repose_deg"};
+  res.energy.units = {"s", "J", "J", "J", "m", "deg"};
   res.prep.name = "prep";
   res.prep.columns = {"time", "ke_per_grain", "ke_flow_per_grain"};
   res.prep.units = {"s", "J", "J"};
@@ -491,6 +521,14 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
       return deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile).x;
     };
+    // The heap as the final measurement would read it now (NaN angle: no fit yet).
+    auto heap_now = [&]() {
+      const Particles& p = w.particles();
+      const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
+      const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
+      const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
+      return std::pair<double, double>{front.x, fit.ok ? fit.angle_deg : NAN};
+    };
     const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
     std::vector<Vec3> x_prev = w.particles().x;
     std::vector<double> scratch;
@@ -498,7 +536,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       const Particles& p = w.particles();
       const double ke = kinetic_energy(p);
       const double ke_flow = flow_ke_per_grain(p, w.domain(), x_prev, chunk * w.dt(), cfg.rest_trim, scratch);
-      res.energy.add({w.time(), ke, ke / n_mobile, ke_flow, front_now()}, obs);
+      const auto [front_x, angle] = heap_now();
+      res.energy.add({w.time(), ke, ke / n_mobile, ke_flow, front_x, angle}, obs);
       return ke_flow;
     };
     w.refresh();
@@ -549,16 +588,43 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     for (std::size_t b = 0; b < prof.x.size(); ++b)
       res.profile.add({prof.x[b], prof.h[b], static_cast<double>(prof.count[b])}, nullptr);
 
+    std::string not_at_rest;
     if (!at_rest) {
       std::ostringstream os;
-      os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit
-         << " s): flow kinetic energy per grain " << res.energy.rows.back()[3] << " J, threshold " << res.rest_ke_J
-         << " J" << few_grains_moving(p, mobile, floor_level, front_now(), d_mean);
+      os << "flow kinetic energy per grain " << res.energy.rows.back()[3] << " J, threshold " << res.rest_ke_J << " J"
+         << few_grains_moving(p, mobile, floor_level, front_now(), d_mean);
+      not_at_rest = os.str();
+      const HeapStillness still =
+          heap_stillness(res.energy, w.time() - cfg.rest_profile_window, cfg.min_collapse_time);
+      if (cfg.rest_profile_window > 0.0 && still.judged) {
+        res.profile_angle_change_deg = still.angle_change_deg;
+        res.profile_front_change_m = still.front_change_m;
+        res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
+      }
+    }
+    if (!at_rest && !res.rest_by_profile) {
+      std::ostringstream os;
+      os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit << " s): " << not_at_rest;
+      if (res.profile_angle_change_deg > 0 || res.profile_front_change_m > 0)
+        os << "; over the last " << cfg.rest_profile_window << " s its angle moved by " << res.profile_angle_change_deg
+           << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by " << res.profile_front_change_m
+           << " m (tolerance one bin, " << bin << " m)";
       res.outcome.status = SceneStatus::not_settled;
       res.outcome.failed_stage = "collapse";
       res.outcome.message = os.str();
     } else {
-      res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
+      if (res.rest_by_profile) {
+        res.time_to_rest_s = w.time();
+        std::ostringstream os;
+        os.precision(3);
+        os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
+           << not_at_rest << "; but over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
+           << res.profile_angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
+           << res.profile_front_change_m << " m (tolerance " << bin << " m): the angle is the final state's";
+        res.outcome.warnings.push_back(os.str());
+      } else {
+        res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
+      }
       const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
       const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
       if (front.bin >= 0)  // no front, no deposit to be beyond

@@ -86,7 +86,16 @@ struct ReposeConfig {
   // at ~20 deg.)
   double collapse_drag = 0.0;
   double min_collapse_time = 0.05; // [s] rest is not judged earlier (the column starts at rest)
-  double time_limit = 2.0;         // [s] after the gate opens; beyond it: not_settled
+  double time_limit = 2.0;         // [s] after the gate opens; beyond it: not_settled, unless ...
+  // ... the heap itself has held still: its fitted angle within rest_profile_tol_deg
+  // and its front within one profile bin over the last rest_profile_window seconds.
+  // Undamped, a few grains bouncing in the rough floor's hollows (or the heap rocking
+  // on its rolling springs) can keep the kinetic energy above the threshold for good
+  // while the angle, the answer, no longer changes. Judged only at the time limit, so
+  // a run that rests by kinetic energy is the same run with or without it; the
+  // result then carries a warning. 0: off.
+  double rest_profile_window = 0.5;   // [s]
+  double rest_profile_tol_deg = 0.2;  // [deg]
   double sample_interval = 0.005;  // [s] between series rows and rest checks
 
   // Numerics
@@ -123,7 +132,9 @@ struct ReposeResult {
   long grains_beyond_front = 0;  // mobile grains past the deposit's front (left out of the fit)
   double front_m = 0;         // L_inf: front position from the back wall
   double final_height_m = 0;  // deposit height above the floor level
-  double time_to_rest_s = 0;  // after the gate opened
+  double time_to_rest_s = 0;  // after the gate opened (by profile: the time limit)
+  bool rest_by_profile = false;  // kinetic energy never passed; the heap's angle and front held still
+  double profile_angle_change_deg = 0, profile_front_change_m = 0;  // over the window, when judged
   bool reached_end_wall = false;
 
   // Set-up, recorded

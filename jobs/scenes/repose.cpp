@@ -46,6 +46,10 @@ std::vector<ParamSpec> repose_params() {
   p.push_back(real_param(kSection, "collapse_drag", "collapse_drag", d.collapse_drag).at_least(0).at_most(1e4));
   p.push_back(real_param(kSection, "min_collapse_time", "min_collapse_time", d.min_collapse_time).at_least(0).at_most(1000));
   p.push_back(real_param(kSection, "time_limit", "time_limit", nullptr).above(0).at_most(1000));
+  // No fallback, as side_walls: tasks of jobs that leave these out keep their keys
+  // (the check only turns runs that would end not_settled into results).
+  p.push_back(real_param(kSection, "rest_profile_window", "rest_profile_window", nullptr).at_least(0).at_most(1000));
+  p.push_back(real_param(kSection, "rest_profile_tol_deg", "rest_profile_tol_deg", nullptr).above(0).at_most(90));
   p.push_back(real_param(kSection, "sample_interval", "sample_interval", d.sample_interval).above(0).at_most(10));
   // Numerics: dt or dt_factor (resolve() rejects both).
   p.push_back(real_param(kSection, "stiffness_scale", "stiffness_scale", nullptr).above(0).at_most(1));
@@ -86,6 +90,8 @@ engine::ReposeConfig config_from(const nlohmann::json& p) {
   c.collapse_drag = p.at("collapse_drag").get<double>();
   c.min_collapse_time = p.at("min_collapse_time").get<double>();
   c.time_limit = p.at("time_limit").get<double>();
+  if (p.contains("rest_profile_window")) c.rest_profile_window = p.at("rest_profile_window").get<double>();
+  if (p.contains("rest_profile_tol_deg")) c.rest_profile_tol_deg = p.at("rest_profile_tol_deg").get<double>();
   c.sample_interval = p.at("sample_interval").get<double>();
   c.stiffness_scale = p.at("stiffness_scale").get<double>();
   c.dt = p.value("dt", 0.0);

@@ -270,6 +270,12 @@ TEST(ReposeConfig, ValidateNamesTheField) {
   c.collapse_drag = -1.0;
   EXPECT_EQ(field_of(c), "repose.collapse_drag");
   c = ok;
+  c.rest_profile_window = -0.1;
+  EXPECT_EQ(field_of(c), "repose.rest_profile_window");
+  c = ok;
+  c.rest_profile_tol_deg = 0.0;
+  EXPECT_EQ(field_of(c), "repose.rest_profile_tol_deg");
+  c = ok;
   c.threads = 0;
   EXPECT_EQ(field_of(c), "threads");
 }
@@ -292,6 +298,43 @@ TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
   EXPECT_FALSE(r.energy.rows.empty());
   for (const Series* s : {&r.energy, &r.prep, &r.profile})  // HDF5 writes one unit per column
     EXPECT_EQ(s->units.size(), s->columns.size()) << s->name;
+}
+
+TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {
+  // Seed 1 at eta = 0.3: three grains bouncing in the rough floor's hollows keep the
+  // flow kinetic energy 16x above the rest threshold to the time limit, undamped as
+  // the seed's law is, while the heap itself has stopped.
+  ReposeConfig c = cheap(30.0, 0.3);
+  c.seed = 1;
+  const ReposeResult r = run_repose(c);
+  report("rattlers, profile", r);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  EXPECT_TRUE(r.rest_by_profile);
+  EXPECT_LE(r.profile_angle_change_deg, c.rest_profile_tol_deg);
+  EXPECT_LE(r.profile_front_change_m, r.bin_width);
+  EXPECT_GT(r.energy.rows.back()[r.energy.column("ke_flow_per_grain")], r.rest_ke_J);
+  EXPECT_NEAR(r.time_to_rest_s, c.time_limit, 2 * c.sample_interval);
+  ASSERT_EQ(r.outcome.warnings.size(), 1u);
+  EXPECT_NE(r.outcome.warnings[0].find("at rest by its profile"), std::string::npos) << r.outcome.warnings[0];
+  EXPECT_NE(r.outcome.warnings[0].find("rattlers"), std::string::npos) << r.outcome.warnings[0];
+  // The angle is the one the final profile gives, and the series' last row agrees.
+  EXPECT_TRUE(std::isfinite(r.repose_deg));
+  EXPECT_NEAR(r.energy.rows.back()[r.energy.column("repose_deg")], r.repose_deg, 1e-9);
+  bool flagged = false;
+  for (const auto& [k, v] : r.metrics()) flagged |= k == "rest_by_profile" && v == 1.0;
+  EXPECT_TRUE(flagged);
+}
+
+TEST(ReposeScene, AHeapStillFlowingIsNotJudgedAtRestByItsProfile) {
+  ReposeConfig c = cheap(30.0, 0.1);
+  c.time_limit = 0.15;  // the column is still spreading
+  c.rest_profile_window = 0.05;
+  const ReposeResult r = run_repose(c);
+  report("flowing, profile", r);
+  EXPECT_EQ(r.outcome.status, SceneStatus::not_settled) << r.outcome.message;
+  EXPECT_FALSE(r.rest_by_profile);
+  EXPECT_GT(r.profile_front_change_m + r.profile_angle_change_deg, 0.0);
+  EXPECT_NE(r.outcome.message.find("its angle moved by"), std::string::npos) << r.outcome.message;
 }
 
 TEST(ReposeScene, FrictionRaisesTheAngleAndRollingResistanceRaisesItFurther) {

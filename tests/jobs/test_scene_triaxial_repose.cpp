@@ -148,6 +148,10 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   // side_walls has no default in the task parameters: jobs written before it
   // existed keep their task keys (and their stored results).
   EXPECT_FALSE(rep.tasks[0].params.contains("side_walls"));
+  // Nor have the rest-by-profile settings: the check only turns runs that would end
+  // not_settled into results, so stored results keep their keys.
+  EXPECT_FALSE(rep.tasks[0].params.contains("rest_profile_window"));
+  EXPECT_FALSE(rep.tasks[0].params.contains("rest_profile_tol_deg"));
 
   const Job walls = example("repose-side-walls.json");
   ASSERT_EQ(walls.tasks.size(), 6u);
@@ -258,6 +262,8 @@ const std::vector<Bad>& bad_cases() {
       {"repose_particles_not_a_knob", true, [](json& j) { j["repose"]["particles"] = 3000; }, "repose.particles"},
       {"repose_eta_negative", true, [](json& j) { j["grid"]["eta"] = {-0.1}; }, "grid.eta[0]"},
       {"repose_slab_too_thin", true, [](json& j) { j["repose"]["depth_diameters"] = 1.5; }, "repose.depth_diameters"},
+      {"repose_profile_window_negative", true, [](json& j) { j["repose"]["rest_profile_window"] = -1; }, "repose.rest_profile_window"},
+      {"repose_profile_tol_zero", true, [](json& j) { j["repose"]["rest_profile_tol_deg"] = 0; }, "repose.rest_profile_tol_deg"},
       {"repose_side_walls_unknown", true, [](json& j) { j["repose"]["side_walls"] = "rough"; }, "repose.side_walls"},
       {"repose_side_walls_too_close", true, [](json& j) { j["repose"]["side_walls"] = "frictional"; j["repose"]["depth_diameters"] = 1.0; }, "repose.depth_diameters"},
       {"repose_column_too_narrow", true, [](json& j) { j["repose"]["column_width"] = 0.003; }, "repose.column_width"},
