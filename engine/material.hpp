@@ -1,5 +1,6 @@
 #pragma once
 // Material of the grains and the contact parameters derived from it (seed Table 2.1).
+#include "size_distribution.hpp"
 #include "types.hpp"
 
 #include <cmath>
@@ -18,7 +19,10 @@ struct Material {
   // off = rolling only (the tangential part), the common reading.
   bool rolling_twist = false;
   double d_min = 1.0e-3;        // smallest diameter [m]
-  double d_max = 2.0e-3;        // largest diameter [m]; diameters uniform in [d_min, d_max]
+  double d_max = 2.0e-3;        // largest diameter [m]
+  SizeDistribution size_distribution = SizeDistribution::uniform;  // how diameters fill [d_min, d_max]
+
+  Grading grading() const { return {size_distribution, d_min, d_max}; }
 
   void validate() const;  // throws ConfigError naming the field
 };

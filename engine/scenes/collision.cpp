@@ -86,7 +86,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
     mat.rolling_eta = 0.0;
   }
   std::mt19937_64 rng(cfg.seed);
-  std::vector<double> radii = sample_radii(cfg.particles, mat.d_min, mat.d_max, rng);
+  std::vector<double> radii = sample_radii(cfg.particles, mat.grading(), rng);
   double vs = 0.0;
   for (double r : radii) vs += sphere_volume(r);
   const double edge = std::cbrt(vs / cfg.solid_fraction);

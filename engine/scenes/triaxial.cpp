@@ -83,7 +83,7 @@ double inertial_number(double rate, double d, double rho, double p) {
 }  // namespace
 
 double TriaxialConfig::nominal_inertial_number() const {
-  return inertial_number(strain_rate, 0.5 * (material.d_min + material.d_max), grain_density(), confining_pressure);
+  return inertial_number(strain_rate, material.grading().mean(), grain_density(), confining_pressure);
 }
 
 void TriaxialConfig::validate() const {
@@ -463,10 +463,10 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
                       "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1",
                       "1",  "1"};
 
-  // Sample: diameters uniform in [d_min, d_max], random insertion at a low solid fraction.
+  // Sample: diameters from the material's grading, random insertion at a low solid fraction.
   const Material& mat = cfg.material;
   std::mt19937_64 rng(cfg.seed);
-  std::vector<double> radii = sample_radii(cfg.particles, mat.d_min, mat.d_max, rng);
+  std::vector<double> radii = sample_radii(cfg.particles, mat.grading(), rng);
   double vs = 0.0, dsum = 0.0;
   for (double r : radii) {
     vs += sphere_volume(r);

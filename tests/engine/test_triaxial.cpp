@@ -624,3 +624,20 @@ TEST(TriaxialScene, SnapshotsAtPreparationEveryFivePercentAndTheEnd) {
   EXPECT_TRUE(std::is_sorted(rec.times.begin(), rec.times.end()));
   EXPECT_LT(rec.times.front(), rec.times.back());
 }
+
+TEST(TriaxialScene, TheSampleIsDrawnFromTheMaterialsGrading) {
+  // Stopped in the first preparation stage: only the drawn sample is read.
+  for (SizeDistribution s : kSizeDistributions) {
+    TriaxialConfig c = short_loose(0.01, 0.005);
+    c.particles = 2000;
+    c.prep_step_budget = 10;
+    c.material.size_distribution = s;
+    const TriaxialResult r = run_triaxial(c);
+    EXPECT_FALSE(r.outcome.ok());
+    const double expected = c.material.grading().mean();
+    EXPECT_NEAR(r.d_mean / expected, 1.0, 0.01) << to_string(s) << ": " << r.d_mean;
+  }
+  // The three means (1.5, 1.333, 1.286 mm) are far apart next to that tolerance.
+  EXPECT_GT(Grading({SizeDistribution::uniform, 1e-3, 2e-3}).mean(),
+            1.1 * Grading({SizeDistribution::uniform_mass, 1e-3, 2e-3}).mean());
+}

@@ -152,10 +152,29 @@ TEST(TriaxialReposeScenes, ExamplesValidate) {
   // not_settled into results, so stored results keep their keys.
   EXPECT_FALSE(rep.tasks[0].params.contains("rest_profile_window"));
   EXPECT_FALSE(rep.tasks[0].params.contains("rest_profile_tol_deg"));
+  // The grading likewise: uniform by number unless a job names another.
+  EXPECT_FALSE(rep.tasks[0].params.contains("size_distribution"));
 
   const Job walls = example("repose-side-walls.json");
   ASSERT_EQ(walls.tasks.size(), 6u);
   for (const auto& t : walls.tasks) EXPECT_EQ(t.params["side_walls"].get<std::string>(), "frictional");
+}
+
+TEST(TriaxialReposeScenes, AGradingIsATaskParameterAndAGridAxis) {
+  json j = triaxial_base();
+  j["material"]["diameter"]["distribution"] = "log_uniform_mass";
+  const Job one = parse(j);
+  ASSERT_EQ(one.tasks.size(), 2u);  // theta 20 and 30
+  EXPECT_EQ(one.tasks[0].params["size_distribution"], "log_uniform_mass");
+  j = triaxial_base();
+  j["grid"] = {{"size_distribution", {"uniform", "uniform_mass"}}};
+  const Job two = parse(j);
+  ASSERT_EQ(two.tasks.size(), 2u);
+  EXPECT_NE(two.tasks[0].key, two.tasks[1].key);
+  // Naming the default is another key than leaving it out: the parameters differ.
+  j = triaxial_base();
+  j.erase("grid");
+  EXPECT_NE(two.tasks[0].key, parse(j).tasks[0].key);
 }
 
 TEST(TriaxialReposeScenes, SideWallsBetweenWallsMayBeThinnerThanThePeriodicSlab) {
@@ -262,6 +281,7 @@ const std::vector<Bad>& bad_cases() {
       {"repose_particles_not_a_knob", true, [](json& j) { j["repose"]["particles"] = 3000; }, "repose.particles"},
       {"repose_eta_negative", true, [](json& j) { j["grid"]["eta"] = {-0.1}; }, "grid.eta[0]"},
       {"repose_slab_too_thin", true, [](json& j) { j["repose"]["depth_diameters"] = 1.5; }, "repose.depth_diameters"},
+      {"size_distribution_unknown", false, [](json& j) { j["material"]["diameter"]["distribution"] = "lognormal"; }, "material.diameter.distribution"},
       {"repose_profile_window_negative", true, [](json& j) { j["repose"]["rest_profile_window"] = -1; }, "repose.rest_profile_window"},
       {"repose_profile_tol_zero", true, [](json& j) { j["repose"]["rest_profile_tol_deg"] = 0; }, "repose.rest_profile_tol_deg"},
       {"repose_side_walls_unknown", true, [](json& j) { j["repose"]["side_walls"] = "rough"; }, "repose.side_walls"},
