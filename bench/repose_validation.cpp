@@ -110,9 +110,9 @@ int main(int argc, char** argv) {
       std::fclose(f);
     }
     if (FILE* f = std::fopen((out + "_energy.csv").c_str(), "w")) {
-      std::fprintf(f, "time,kinetic,ke_per_grain,ke_flow_per_grain,front_x\n");
+      std::fprintf(f, "time,kinetic,ke_per_grain,ke_flow_per_grain,front_x,repose_deg\n");
       for (const auto& row : r.energy.rows)
-        std::fprintf(f, "%.6e,%.6e,%.6e,%.6e,%.6e\n", row[0], row[1], row[2], row[3], row[4]);
+        std::fprintf(f, "%.6e,%.6e,%.6e,%.6e,%.6e,%.6e\n", row[0], row[1], row[2], row[3], row[4], row[5]);
       std::fclose(f);
     }
     if (FILE* f = std::fopen((out + "_prep.csv").c_str(), "w")) {

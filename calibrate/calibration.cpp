@@ -303,25 +303,82 @@ double move_of(const Calibration& cal, double theta0, double eta0) {
                   std::abs(cal.result.eta - eta0) / (b.eta_hi - b.eta_lo));
 }
 
-// The last stored round of every fitted job, finished where its runs were cut short
-// (an interrupt, a lost worker); returns that round's record, or none if nothing ran.
+// Whether a stored round was run for other --where values than this fit reads (its
+// spec's grid holds only the values the fit of that round was pinned to).
+bool pinned_elsewhere(const nlohmann::json& spec, const std::vector<jobs::Where>& where) {
+  if (!spec.contains("grid") || !spec["grid"].is_object()) return false;
+  for (const auto& w : where) {
+    if (!spec["grid"].contains(w.key) || !spec["grid"][w.key].is_array()) continue;
+    const auto& values = spec["grid"][w.key];
+    if (std::none_of(values.begin(), values.end(), [&](const nlohmann::json& v) { return jobs::value_matches(v, w.value); }))
+      return true;
+  }
+  return false;
+}
+
+// Round r's points, as a stored sub-job's grid holds them (theta x eta).
+std::vector<RefinePoint> points_of(const nlohmann::json& spec) {
+  std::vector<RefinePoint> pts;
+  const auto& g = spec.at("grid");
+  for (const auto& th : g.at("theta_deg"))
+    for (const auto& et : g.at("eta")) pts.push_back({th.get<double>(), et.get<double>()});
+  return pts;
+}
+
+// The last stored round R of the fitted jobs, finished: a job whose R sub-job has
+// unfinished runs (an interrupt, a lost worker) gets them run; a job without an R
+// sub-job while another has one (the round was cut short before it came to that job)
+// gets R's points. A round run for other --where values is left alone, and one that
+// can no longer be run (its spec, its output folder) is reported and passed over, so
+// that it never blocks new rounds. Returns that round's record, or none if nothing ran.
 std::optional<RefineRound> resume_last_round(db::Store& store, const FitRequest& req, Calibration& cal,
                                              const RefineOptions& opt, std::ostream& log) {
   if (!opt.resume_round) return std::nullopt;
+  const std::set<std::string> jobs_fitted = fitted_jobs(cal);
+  int last = 0;
+  for (const auto& job : jobs_fitted)
+    for (const auto& sub : refine_jobs_of(store, job)) last = std::max(last, refine_round(sub));
+  if (last == 0) return std::nullopt;
+  std::optional<std::vector<RefinePoint>> points;
+  for (const auto& job : jobs_fitted)
+    if (const auto text = store.job_spec(refine_job_name(job, last)); text && !points) try {
+        points = points_of(nlohmann::json::parse(*text));
+      } catch (const nlohmann::json::exception&) {
+      }
   RefineRound rec;
   rec.resumed = true;
+  rec.round = last;
   const double th0 = cal.result.theta, et0 = cal.result.eta;
   nlohmann::json resumed = nlohmann::json::array();
-  for (const auto& job : fitted_jobs(cal)) {
-    const auto subs = refine_jobs_of(store, job);
-    if (subs.empty()) continue;
-    const int open = unfinished_tasks(store, subs.back());
+  for (const auto& job : jobs_fitted) {
+    const std::string sub = refine_job_name(job, last);
+    const auto text = store.job_spec(sub);
+    if (!text) {
+      if (!points) continue;
+      log << "refine: round " << last << " stopped before job " << job << "; running its " << points->size()
+          << " point(s) there\n";
+      opt.run_points(store, job, last, *points);
+      resumed.push_back(sub);
+      continue;
+    }
+    const int open = unfinished_tasks(store, sub);
     if (open == 0) continue;
-    log << "refine: resuming round " << refine_round(subs.back()) << " of job " << job << " (" << open
-        << " run(s) unfinished)\n";
-    opt.resume_round(store, subs.back());
-    rec.round = std::max(rec.round, refine_round(subs.back()));
-    resumed.push_back(subs.back());
+    try {
+      if (pinned_elsewhere(nlohmann::json::parse(*text), req.where)) {
+        log << "refine: round " << last << " of job " << job << " has " << open
+            << " unfinished run(s) for other --where values than this fit's; left as it is\n";
+        continue;
+      }
+      log << "refine: resuming round " << last << " of job " << job << " (" << open << " run(s) unfinished)\n";
+      opt.resume_round(store, sub);
+      resumed.push_back(sub);
+    } catch (const JobError& e) {
+      log << "refine: warning: round " << last << " of job " << job << " cannot be resumed (" << e.what()
+          << "); going on with new rounds\n";
+    } catch (const nlohmann::json::exception& e) {
+      log << "refine: warning: round " << last << " of job " << job << " has a spec this build cannot read (" << e.what()
+          << "); going on with new rounds\n";
+    }
   }
   if (resumed.empty()) return std::nullopt;
   cal = calibrate(store, req);
@@ -393,6 +450,10 @@ void run_round(db::Store& store, const jobs::Job& sub, const std::string& out_di
   if (s.interrupted)
     throw std::runtime_error(
         "refinement interrupted; finished runs are kept, and `demcal fit` with --refine again finishes the round first");
+  if (s.superseded)
+    throw std::runtime_error("refinement " + sub.name +
+                             ": another `demcal fit --refine` recorded this round with other points while it ran; "
+                             "finished runs of both are kept, and --refine again goes on from the last round");
   if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
 }
 

@@ -134,8 +134,9 @@ void add_fit(CLI::App& app, int& exit_code) {
         for (const auto& r : rounds)
           std::cout << "refine round " << r.round << ": "
                     << (r.resumed ? std::string("resumed") : std::to_string(r.points.size()) + " run(s)")
-                    << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta) << "; moved " << g(100 * r.move, 3)
-                    << "% of the range (fit " << r.fit_id << ")\n";
+                    << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta)
+                    << (std::isfinite(r.move) ? "; moved " + g(100 * r.move, 3) + "% of the range" : std::string("; no answer"))
+                    << " (fit " << r.fit_id << ")\n";
       }
       if (!cal.result.ok) {
         std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";

@@ -88,30 +88,52 @@ std::string few_grains_moving(const Particles& p, const std::vector<std::uint8_t
 }
 
 // How far the heap moved over the collapse series' rows from time `from` on, read
-// from their front and angle columns. Not judged when the window would start
-// before `earliest` or a row in it has no angle (no heap to fit yet).
+// from their front and angle columns. Not judged (and `why` says so) when the window
+// would start before `earliest`, holds fewer than two rows, or a row in it has no
+// angle (no heap to fit).
 struct HeapStillness {
   bool judged = false;
+  std::string why;
+  double since = 0;  // time of the window's first row
   double angle_change_deg = 0, front_change_m = 0;
 };
 HeapStillness heap_stillness(const Series& energy, double from, double earliest) {
   HeapStillness h;
-  if (from < earliest) return h;
+  if (from < earliest) {
+    h.why = "its window starts before min_collapse_time";
+    return h;
+  }
   const std::size_t t = energy.column("time"), f = energy.column("front_x"), a = energy.column("repose_deg");
   double a_lo = INFINITY, a_hi = -INFINITY, f_lo = INFINITY, f_hi = -INFINITY;
   int rows = 0;
   for (const auto& row : energy.rows) {
     if (row[t] < from) continue;
-    if (!std::isfinite(row[a])) return h;
+    if (!std::isfinite(row[a])) {
+      h.why = "no slope could be fitted to it at " + std::to_string(row[t]) + " s";
+      return h;
+    }
+    if (rows == 0) h.since = row[t];
     a_lo = std::min(a_lo, row[a]), a_hi = std::max(a_hi, row[a]);
     f_lo = std::min(f_lo, row[f]), f_hi = std::max(f_hi, row[f]);
     ++rows;
   }
-  if (rows < 2) return h;
+  if (rows < 2) {
+    h.why = "its window holds fewer than two samples";
+    return h;
+  }
   h.judged = true;
   h.angle_change_deg = a_hi - a_lo;
   h.front_change_m = f_hi - f_lo;
   return h;
+}
+
+// The largest flow kinetic energy of the last `n` samples: the rest test needs all
+// of them below the threshold, so the last one alone may read quiet.
+double recent_flow_ke(const Series& energy, int n) {
+  const std::size_t k = energy.column("ke_flow_per_grain");
+  double e = 0.0;
+  for (std::size_t i = energy.rows.size(); i-- > 0 && n-- > 0;) e = std::max(e, energy.rows[i][k]);
+  return e;
 }
 
 Wall make_wall(const std::string& name, const Vec3& point, const Vec3& normal, bool rough) {
@@ -592,39 +614,43 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     for (std::size_t b = 0; b < prof.x.size(); ++b)
       res.profile.add({prof.x[b], prof.h[b], static_cast<double>(prof.count[b])}, nullptr);
 
-    std::string not_at_rest;
+    std::string not_at_rest, profile_note;
+    HeapStillness still;
     if (!at_rest) {
       std::ostringstream os;
-      os << "flow kinetic energy per grain " << res.energy.rows.back()[3] << " J, threshold " << res.rest_ke_J << " J"
+      os << "flow kinetic energy per grain up to " << recent_flow_ke(res.energy, cfg.rest_samples) << " J over the last "
+         << cfg.rest_samples << " samples, threshold " << res.rest_ke_J << " J"
          << few_grains_moving(p, mobile, floor_level, front_now(), d_mean);
       not_at_rest = os.str();
-      const HeapStillness still =
-          heap_stillness(res.energy, w.time() - cfg.rest_profile_window, cfg.min_collapse_time);
-      if (cfg.rest_profile_window > 0.0 && still.judged) {
-        res.profile_angle_change_deg = still.angle_change_deg;
-        res.profile_front_change_m = still.front_change_m;
-        res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
+      if (cfg.rest_profile_window > 0.0) {
+        still = heap_stillness(res.energy, w.time() - cfg.rest_profile_window, cfg.min_collapse_time);
+        std::ostringstream note;
+        if (still.judged) {
+          res.profile_angle_change_deg = still.angle_change_deg;
+          res.profile_front_change_m = still.front_change_m;
+          res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
+          note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
+               << still.angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
+               << still.front_change_m << " m (tolerance one bin, " << bin << " m)";
+        } else {
+          note << "the heap's profile was not judged: " << still.why;
+        }
+        profile_note = note.str();
       }
     }
     if (!at_rest && !res.rest_by_profile) {
       std::ostringstream os;
       os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit << " s): " << not_at_rest;
-      if (res.profile_angle_change_deg > 0 || res.profile_front_change_m > 0)
-        os << "; over the last " << cfg.rest_profile_window << " s its angle moved by " << res.profile_angle_change_deg
-           << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by " << res.profile_front_change_m
-           << " m (tolerance one bin, " << bin << " m)";
+      if (!profile_note.empty()) os << "; " << profile_note;
       res.outcome.status = SceneStatus::not_settled;
       res.outcome.failed_stage = "collapse";
       res.outcome.message = os.str();
     } else {
       if (res.rest_by_profile) {
-        res.time_to_rest_s = w.time();
+        res.time_to_rest_s = still.since;  // still since at least then
         std::ostringstream os;
-        os.precision(3);
         os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
-           << not_at_rest << "; but over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
-           << res.profile_angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
-           << res.profile_front_change_m << " m (tolerance " << bin << " m): the angle is the final state's";
+           << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start";
         res.outcome.warnings.push_back(os.str());
       } else {
         res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample

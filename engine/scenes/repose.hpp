@@ -154,7 +154,7 @@ struct ReposeResult {
   std::string boundaries;     // words: which walls, which are periodic
 
   Series prep;     // preparation: time, ke_per_grain, ke_flow_per_grain (damped settling behind the gate)
-  Series energy;   // collapse: time, kinetic, ke_per_grain, ke_flow_per_grain (trimmed), front_x
+  Series energy;   // collapse: time, kinetic, ke_per_grain, ke_flow_per_grain (trimmed), front_x, repose_deg (NaN: no fit)
   Series profile;  // final: x, h, count
   Particles final_particles;  // floor (fixed) grains first, then the mobile ones
 

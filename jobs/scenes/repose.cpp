@@ -149,6 +149,17 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
                                               " s, its default), got " + num(p["time_limit"]));
     throw JobError("repose.min_collapse_time", "must be below repose.time_limit (" + num(p["time_limit"]) + ")");
   }
+  // A window the job sets must fit the collapse, or the check it asks for never runs.
+  if (p.contains("rest_profile_window") && p["rest_profile_window"].get<double>() > 0.0) {
+    const double w = p["rest_profile_window"].get<double>(), dt = p["sample_interval"].get<double>();
+    const double room = p["time_limit"].get<double>() - p["min_collapse_time"].get<double>();
+    if (w < 2.0 * dt)
+      throw JobError("repose.rest_profile_window", "must span at least two samples (2 x repose.sample_interval = " +
+                                                       num(2.0 * dt) + " s) or be 0 (off), got " + num(p["rest_profile_window"]));
+    if (w > room)
+      throw JobError("repose.rest_profile_window", "must fit between repose.min_collapse_time and repose.time_limit (" +
+                                                       num(room) + " s here), got " + num(p["rest_profile_window"]));
+  }
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {

@@ -584,6 +584,100 @@ TEST(CalibrateRefine, AnUnfinishedRoundIsFinishedBeforeNewOnes) {
   EXPECT_EQ(calls.back().first, 3);
 }
 
+// A repose-like job: one task per point, finished with repose_deg.
+void store_fake_repose(db::Store& st, const std::string& name, const std::vector<double>& ths,
+                       const std::vector<double>& ets) {
+  std::vector<db::NewTask> tasks;
+  for (double th : ths)
+    for (double et : ets) {
+      const nlohmann::json p = {{"theta_deg", th}, {"eta", et}, {"seed", 1}};
+      tasks.push_back({name + ":" + p.dump(), "repose", p.dump()});
+    }
+  const nlohmann::json spec = {{"name", name}, {"scene", "repose"}, {"grid", {{"theta_deg", ths}, {"eta", ets}}}};
+  st.put_job(name, spec.dump(), tasks);
+  for (const auto& t : st.tasks(name)) {
+    const auto p = nlohmann::json::parse(t.params_json);
+    ASSERT_TRUE(st.claim(t.id, "test"));
+    db::Outcome o;
+    o.status = "done";
+    o.metrics = {{"repose_deg", 10.0 + 0.4 * p["theta_deg"].get<double>() + 20.0 * p["eta"].get<double>()}};
+    st.finish(t.id, "test", o);
+  }
+}
+
+TEST(CalibrateRefine, ARoundCutShortBeforeAJobRunsItsPointsThere) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  const std::vector<double> ths = {15, 25, 35, 45}, ets = {0.0, 0.2, 0.4, 0.6};
+  store_fake_job(s, "tri", ths, ets, 1, 0.0, 1);
+  store_fake_repose(s, "rep", ths, ets);
+  // Round 1 ran for "rep" (first by name) and was cut off before "tri".
+  store_fake_repose(s, "rep.refine1", {30, 35}, {0.2, 0.3});
+  calibrate::FitRequest req;
+  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"repose", 10.0 + 0.4 * 31.3 + 20.0 * 0.27}};
+  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
+  std::vector<std::string> ran;
+  std::ostringstream log;
+  calibrate::RefineOptions ro;
+  ro.rounds = 1;
+  ro.tolerance = 0;
+  ro.log = &log;
+  ro.run_points = [&](db::Store& st, const std::string& job, int round, const std::vector<calibrate::RefinePoint>& pts) {
+    calls.emplace_back(round, pts);
+    ran.push_back(calibrate::refine_job_name(job, round));
+    std::set<double> t, e;
+    for (const auto& p : pts) t.insert(p.theta), e.insert(p.eta);
+    if (job == "rep")
+      store_fake_repose(st, calibrate::refine_job_name(job, round), {t.begin(), t.end()}, {e.begin(), e.end()});
+    else
+      store_fake_job(st, calibrate::refine_job_name(job, round), {t.begin(), t.end()}, {e.begin(), e.end()}, 1, 0.0, 1);
+  };
+  ro.resume_round = [&](db::Store&, const std::string& sub) { ran.push_back("resume " + sub); };
+  calibrate::Calibration cal = calibrate::calibrate(s, req);
+  ASSERT_TRUE(cal.result.ok);
+  const auto rounds = calibrate::refine(s, req, cal, ro);
+  EXPECT_EQ(ran, (std::vector<std::string>{"tri.refine1", "rep.refine2", "tri.refine2"})) << log.str();
+  ASSERT_FALSE(calls.empty());
+  // Round 1's own points, read back from rep.refine1's grid.
+  std::set<std::pair<double, double>> pts;
+  for (const auto& p : calls[0].second) pts.insert({p.theta, p.eta});
+  EXPECT_EQ(pts, (std::set<std::pair<double, double>>{{30, 0.2}, {30, 0.3}, {35, 0.2}, {35, 0.3}}));
+  ASSERT_EQ(rounds.size(), 2u);
+  EXPECT_TRUE(rounds[0].resumed);
+  EXPECT_EQ(rounds[0].round, 1);
+  EXPECT_NE(log.str().find("round 1 stopped before job tri"), std::string::npos) << log.str();
+}
+
+TEST(CalibrateRefine, ARoundThatCannotBeResumedDoesNotBlockNewRounds) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+  store_fake_job(s, "coarse.refine1", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
+  calibrate::FitRequest req;
+  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
+  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
+  std::ostringstream log;
+  calibrate::RefineOptions ro;
+  ro.rounds = 1;
+  ro.tolerance = 0;
+  ro.log = &log;
+  ro.run_points = fake_point_runner(calls);
+  ro.resume_round = [](db::Store&, const std::string&) {
+    throw jobs::JobError("--out", "cannot write into the output folder /x");
+  };
+  calibrate::Calibration cal = calibrate::calibrate(s, req);
+  const auto rounds = calibrate::refine(s, req, cal, ro);
+  ASSERT_EQ(rounds.size(), 1u);
+  EXPECT_EQ(rounds[0].round, 2);
+  EXPECT_FALSE(rounds[0].resumed);
+  EXPECT_NE(log.str().find("round 1 of job coarse cannot be resumed"), std::string::npos) << log.str();
+  // An interrupt is no such error: it ends the refinement.
+  store_fake_job(s, "coarse.refine3", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
+  ro.resume_round = [](db::Store&, const std::string&) { throw std::runtime_error("refinement interrupted"); };
+  cal = calibrate::calibrate(s, req);
+  EXPECT_THROW(calibrate::refine(s, req, cal, ro), std::runtime_error);
+}
+
 TEST(CalibrateRefine, DemRoundResumerRunsOnlyTheRoundsUnfinishedTasks) {
   TempDir d;
   db::Store s(d.file("demcal.db"));

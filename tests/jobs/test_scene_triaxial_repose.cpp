@@ -283,6 +283,8 @@ const std::vector<Bad>& bad_cases() {
       {"repose_slab_too_thin", true, [](json& j) { j["repose"]["depth_diameters"] = 1.5; }, "repose.depth_diameters"},
       {"size_distribution_unknown", false, [](json& j) { j["material"]["diameter"]["distribution"] = "lognormal"; }, "material.diameter.distribution"},
       {"repose_profile_window_negative", true, [](json& j) { j["repose"]["rest_profile_window"] = -1; }, "repose.rest_profile_window"},
+      {"repose_profile_window_past_the_limit", true, [](json& j) { j["repose"]["time_limit"] = 1.5; j["repose"]["rest_profile_window"] = 5; }, "repose.rest_profile_window"},
+      {"repose_profile_window_one_sample", true, [](json& j) { j["repose"]["rest_profile_window"] = 0.005; }, "repose.rest_profile_window"},
       {"repose_profile_tol_zero", true, [](json& j) { j["repose"]["rest_profile_tol_deg"] = 0; }, "repose.rest_profile_tol_deg"},
       {"repose_side_walls_unknown", true, [](json& j) { j["repose"]["side_walls"] = "rough"; }, "repose.side_walls"},
       {"repose_side_walls_too_close", true, [](json& j) { j["repose"]["side_walls"] = "frictional"; j["repose"]["depth_diameters"] = 1.0; }, "repose.depth_diameters"},
