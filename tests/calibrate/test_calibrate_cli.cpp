@@ -494,19 +494,32 @@ bool has_point(const calibrate::ResponseSurface& rs, double th, double et) {
                      [&](const calibrate::GridPoint& p) { return p.theta == th && p.eta == et && !p.hole(); });
 }
 
-TEST(CalibrateRefine, ALaterInvocationNumbersOnAndKeepsTheEarlierRounds) {
+// A coarse grid, the targets of (31.3, 0.27), and options for one new round whose
+// runs a fake DEM stores (tolerance 0: every asked round runs).
+class RefineRounds : public ::testing::Test {
+ protected:
   TempDir d;
-  db::Store s(d.file("demcal.db"));
-  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+  db::Store s{d.file("demcal.db")};
   calibrate::FitRequest req;
-  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
   std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
   std::ostringstream log;
   calibrate::RefineOptions ro;
-  ro.rounds = 1;
-  ro.tolerance = 0;  // every asked round runs
-  ro.log = &log;
-  ro.run_points = fake_point_runner(calls);
+
+  void SetUp() override {
+    store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
+    req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
+    ro.rounds = 1;
+    ro.tolerance = 0;
+    ro.log = &log;
+    ro.run_points = fake_point_runner(calls);
+  }
+  // Round `round` of an earlier invocation, cut short: one of its four runs never ran.
+  void store_unfinished_round(int round) {
+    store_fake_job(s, calibrate::refine_job_name("coarse", round), {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
+  }
+};
+
+TEST_F(RefineRounds, ALaterInvocationNumbersOnAndKeepsTheEarlierRounds) {
   calibrate::Calibration cal = calibrate::calibrate(s, req);
   ASSERT_EQ(calibrate::refine(s, req, cal, ro).size(), 1u);
   // Another invocation, other targets: its round is 2, and round 1 stays in the job.
@@ -531,22 +544,9 @@ TEST(CalibrateRefine, ALaterInvocationNumbersOnAndKeepsTheEarlierRounds) {
   EXPECT_EQ(nlohmann::json::parse(s.fits().back().result_json)["round"], 2);
 }
 
-TEST(CalibrateRefine, AnUnfinishedRoundIsFinishedBeforeNewOnes) {
-  TempDir d;
-  db::Store s(d.file("demcal.db"));
-  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
-  // Round 1 of an earlier invocation, cut short: one of its four runs never ran.
-  store_fake_job(s, "coarse.refine1", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
-  calibrate::FitRequest req;
-  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
-  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
+TEST_F(RefineRounds, AnUnfinishedRoundIsFinishedBeforeNewOnes) {
+  store_unfinished_round(1);
   std::vector<std::string> resumed;
-  std::ostringstream log;
-  calibrate::RefineOptions ro;
-  ro.rounds = 1;
-  ro.tolerance = 0;
-  ro.log = &log;
-  ro.run_points = fake_point_runner(calls);
   ro.resume_round = [&](db::Store& st, const std::string& sub) {
     resumed.push_back(sub);
     for (const auto& t : st.tasks(sub)) {
@@ -648,20 +648,8 @@ TEST(CalibrateRefine, ARoundCutShortBeforeAJobRunsItsPointsThere) {
   EXPECT_NE(log.str().find("round 1 stopped before job tri"), std::string::npos) << log.str();
 }
 
-TEST(CalibrateRefine, ARoundThatCannotBeResumedDoesNotBlockNewRounds) {
-  TempDir d;
-  db::Store s(d.file("demcal.db"));
-  store_fake_job(s, "coarse", {15, 25, 35, 45}, {0.0, 0.2, 0.4, 0.6}, 1, 0.0, 1);
-  store_fake_job(s, "coarse.refine1", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
-  calibrate::FitRequest req;
-  req.targets = {{"phi_peak", phi_peak_fn(31.3, 0.27)}, {"phi_cv", phi_cv_fn(31.3, 0.27)}};
-  std::vector<std::pair<int, std::vector<calibrate::RefinePoint>>> calls;
-  std::ostringstream log;
-  calibrate::RefineOptions ro;
-  ro.rounds = 1;
-  ro.tolerance = 0;
-  ro.log = &log;
-  ro.run_points = fake_point_runner(calls);
+TEST_F(RefineRounds, ARoundThatCannotBeResumedDoesNotBlockNewRounds) {
+  store_unfinished_round(1);
   ro.resume_round = [](db::Store&, const std::string&) {
     throw jobs::JobError("--out", "cannot write into the output folder /x");
   };
@@ -672,7 +660,7 @@ TEST(CalibrateRefine, ARoundThatCannotBeResumedDoesNotBlockNewRounds) {
   EXPECT_FALSE(rounds[0].resumed);
   EXPECT_NE(log.str().find("round 1 of job coarse cannot be resumed"), std::string::npos) << log.str();
   // An interrupt is no such error: it ends the refinement.
-  store_fake_job(s, "coarse.refine3", {30, 35}, {0.2, 0.3}, 1, 0.0, 1, {}, {{35, 0.3}});
+  store_unfinished_round(3);
   ro.resume_round = [](db::Store&, const std::string&) { throw std::runtime_error("refinement interrupted"); };
   cal = calibrate::calibrate(s, req);
   EXPECT_THROW(calibrate::refine(s, req, cal, ro), std::runtime_error);
