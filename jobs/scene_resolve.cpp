@@ -11,9 +11,10 @@ void resolve_time_step(nlohmann::json& p, const std::string& section, double def
   if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", default_factor));
 }
 
-void check_diameters(const nlohmann::json& p) {
+void resolve_diameters(nlohmann::json& p) {
   if (p["d_min"].get<double>() > p["d_max"].get<double>())
     throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
+  if (p.contains("size_distribution") && p["size_distribution"] == "uniform") p.erase("size_distribution");
 }
 
 void throw_as_job_error(const engine::ConfigError& e, const std::string& job_path) {

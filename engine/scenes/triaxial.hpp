@@ -115,7 +115,7 @@ struct TriaxialConfig {
   void validate() const;  // throws ConfigError naming the field
   StepForecast step_forecast() const;  // for job validation (timestep.hpp)
   // The inertial number strain_rate * d_mean * sqrt(rho / p0) at the start of shear,
-  // from the settings (d_mean of the uniform diameter range): what the run's
+  // from the settings (d_mean of the material's grading): what the run's
   // quasi-static check will meet at least, known before it runs.
   double nominal_inertial_number() const;
   double grain_density() const { return density_scale > 0.0 ? material.density * density_scale : scaled_density; }

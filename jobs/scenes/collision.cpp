@@ -72,7 +72,7 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     if (p["sample_every"].get<std::int64_t>() > steps)
       throw JobError("collision.sample_every", "must not exceed collision.steps (" + std::to_string(steps) + ")");
   }
-  check_diameters(p);
+  resolve_diameters(p);
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {

@@ -133,13 +133,24 @@ std::string num(const nlohmann::json& v) { return v.dump(); }
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
   resolve_time_step(p, kSection, engine::ReposeConfig{}.dt_factor);
+  resolve_diameters(p);
   const Preset pre = preset(fidelity);
   if (!p.contains("column_width")) p["column_width"] = pre.column_width;
   if (!p.contains("column_height")) p["column_height"] = pre.column_height;
-  if (!p.contains("depth_diameters")) p["depth_diameters"] = pre.depth_diameters;
+  if (!p.contains("depth_diameters")) {
+    // The preset's slab depth in metres, whatever the grading: in units of a smaller
+    // mean diameter it would be thinner than the periodic images allow.
+    double depth = pre.depth_diameters;
+    if (p.contains("size_distribution")) {
+      engine::SizeDistribution s = engine::SizeDistribution::uniform;
+      engine::parse_size_distribution(p["size_distribution"].get<std::string>(), s);
+      const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
+      depth *= 0.5 * (d0 + d1) / engine::Grading{s, d0, d1}.mean();
+    }
+    p["depth_diameters"] = depth;
+  }
   if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;
   if (!p.contains("time_limit")) p["time_limit"] = pre.time_limit;
-  check_diameters(p);
   if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>()))
     throw JobError("repose.fit_hi", "must exceed repose.fit_lo (" + num(p["fit_lo"]) + "), got " + num(p["fit_hi"]));
   if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>()) {

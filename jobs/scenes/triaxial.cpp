@@ -147,7 +147,7 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   const Preset pre = preset(fidelity);
   if (!p.contains("particles")) p["particles"] = pre.particles;
   if (!p.contains("strain_rate")) p["strain_rate"] = pre.strain_rate;
-  check_diameters(p);
+  resolve_diameters(p);
 
   // Critical-state window: the last third of the shear unless given.
   const double eps1 = p["axial_strain"].get<double>();

@@ -69,6 +69,23 @@ TEST(SizeDistribution, TheDefaultDrawsTheSameGrainsAsBefore) {
   EXPECT_EQ(sample_radii(5, Grading{SizeDistribution::uniform, kA, kB}, c), old);
 }
 
+TEST(SizeDistribution, NarrowRangesStayInsideTheRange) {
+  // The ratios of integrals cancel when d_max is close to d_min; the closed forms do not.
+  for (SizeDistribution s : kSizeDistributions)
+    for (double rel : {1e-6, 1e-10, 1e-13}) {
+      const Grading g{s, kA, kA * (1 + rel)};
+      EXPECT_GE(g.mean(), g.d_min) << to_string(s) << " " << rel;
+      EXPECT_LE(g.mean(), g.d_max) << to_string(s) << " " << rel;
+      EXPECT_NEAR(g.mean_cube() / (kA * kA * kA), 1.0, 4 * rel + 1e-15) << to_string(s) << " " << rel;
+      std::mt19937_64 rng(5);
+      for (int i = 0; i < 1000; ++i) {
+        const double d = g.draw(rng);
+        ASSERT_GE(d, g.d_min);
+        ASSERT_LE(d, g.d_max);
+      }
+    }
+}
+
 TEST(SizeDistribution, NamesRoundTripAndOneSizeIsOneSize) {
   for (SizeDistribution s : kSizeDistributions) {
     SizeDistribution back = SizeDistribution::uniform;

@@ -171,10 +171,26 @@ TEST(TriaxialReposeScenes, AGradingIsATaskParameterAndAGridAxis) {
   const Job two = parse(j);
   ASSERT_EQ(two.tasks.size(), 2u);
   EXPECT_NE(two.tasks[0].key, two.tasks[1].key);
-  // Naming the default is another key than leaving it out: the parameters differ.
+  // Naming the default is leaving it out: the same key, no parameter.
   j = triaxial_base();
   j.erase("grid");
-  EXPECT_NE(two.tasks[0].key, parse(j).tasks[0].key);
+  EXPECT_EQ(two.tasks[0].key, parse(j).tasks[0].key);
+  EXPECT_FALSE(two.tasks[0].params.contains("size_distribution"));
+  // The quick repose slab keeps its depth in metres under a finer grading: in units
+  // of the smaller mean diameter it would be thinner than the periodic images allow.
+  json r = repose_base();
+  r["repose"].erase("depth_diameters");
+  r["fidelity"] = "quick";
+  const double d_uniform = parse(r).tasks[0].params["depth_diameters"].get<double>() * 1.5e-3;
+  for (const char* g : {"uniform_mass", "log_uniform_mass"}) {
+    r["material"]["diameter"]["distribution"] = g;
+    EXPECT_EQ(error_of(r), "") << g;
+    const Job rep = parse(r);
+    demcal::engine::SizeDistribution s = demcal::engine::SizeDistribution::uniform;
+    ASSERT_TRUE(demcal::engine::parse_size_distribution(g, s));
+    const demcal::engine::Grading grading{s, 1e-3, 2e-3};
+    EXPECT_NEAR(rep.tasks[0].params["depth_diameters"].get<double>() * grading.mean(), d_uniform, 1e-12) << g;
+  }
 }
 
 TEST(TriaxialReposeScenes, SideWallsBetweenWallsMayBeThinnerThanThePeriodicSlab) {
