@@ -87,6 +87,18 @@ void read_object(const SceneDef& scene, const std::string& section, const std::s
   }
 }
 
+// A grid key written as the job file writes it in its section ("diameter.distribution",
+// "distribution", "material.diameter.min") or cut short ("confining"): the flat name
+// it means, or "".
+std::string flat_name_for(const SceneDef& scene, const std::string& k) {
+  for (const auto& s : scene.params)
+    if (k == s.key || k == s.path() || k == s.key.substr(s.key.rfind('.') + 1)) return s.name;
+  if (k.size() >= 3)
+    for (const auto& s : scene.params)
+      if (s.name.rfind(k, 0) == 0) return s.name;
+  return "";
+}
+
 void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out) {
   if (!grid.is_object()) throw JobError("grid", "expected an object of parameter -> list, got " + describe(grid));
   std::vector<std::string> names;
@@ -94,8 +106,14 @@ void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out)
   for (const auto& [k, v] : grid.items()) {
     const std::string path = "grid." + k;
     const ParamSpec* spec = spec_named(scene, k);
-    if (!spec) throw JobError(path, "unknown parameter for scene \"" + scene.name + "\"" +
-                                        (closest(k, names).empty() ? "" : " (did you mean \"" + closest(k, names) + "\"?)"));
+    if (!spec) {
+      // Grid axes take the flat names that `demcal validate` prints.
+      const std::string flat = flat_name_for(scene, k);
+      const std::string near = flat.empty() ? closest(k, names) : flat;
+      throw JobError(path, "unknown parameter for scene \"" + scene.name + "\"" +
+                               (near.empty() ? "" : " (did you mean \"" + near + "\"? grid axes take the flat names "
+                                                    "`demcal validate` prints)"));
+    }
     if (!v.is_array()) throw JobError(path, "expected a list of values, got " + describe(v));
     for (const auto& a : out.axes)
       if (a.name == k) throw JobError(path, "also given as a list at " + a.path);

@@ -180,6 +180,20 @@ TEST(Validation, MissingFile) {
   }
 }
 
+TEST(Validation, AGridKeyWrittenAsInItsSectionSuggestsItsFlatName) {
+  json j = json::parse(kBase);
+  for (const auto& [given, meant] : std::vector<std::pair<std::string, std::string>>{
+           {"distribution", "size_distribution"},
+           {"diameter.distribution", "size_distribution"},
+           {"material.diameter.min", "d_min"},
+           {"partic", "particles"}}) {
+    j["grid"] = {{given, json::array({1})}};
+    const std::string err = error_of(j.dump());
+    EXPECT_NE(err.find("grid." + given + ": unknown parameter"), std::string::npos) << err;
+    EXPECT_NE(err.find("did you mean \"" + meant + "\""), std::string::npos) << given << ": " << err;
+  }
+}
+
 TEST(Validation, TypoSuggestsTheKnownKey) {
   json j = json::parse(kBase);
   j["collision"]["partcles"] = 10;
