@@ -297,10 +297,25 @@ int unfinished_tasks(db::Store& store, const std::string& job) {
   return n;
 }
 
-double move_of(const Calibration& cal, double theta0, double eta0) {
+// The highest round stored for any of the jobs (0: none).
+int last_round(db::Store& store, const std::set<std::string>& jobs_fitted) {
+  int last = 0;
+  for (const auto& job : jobs_fitted)
+    for (const auto& sub : refine_jobs_of(store, job)) last = std::max(last, refine_round(sub));
+  return last;
+}
+
+// Refits after a round's runs: the new candidate into `rec`, and how far it moved
+// from the one before, in fractions of the grid's range.
+void refit(db::Store& store, const FitRequest& req, Calibration& cal, RefineRound& rec) {
+  const double theta0 = cal.result.theta, eta0 = cal.result.eta;
+  cal = calibrate(store, req);
+  rec.ok = cal.result.ok;
+  rec.theta = cal.result.theta;
+  rec.eta = cal.result.eta;
   const Box& b = cal.result.box;
-  return std::max(std::abs(cal.result.theta - theta0) / (b.theta_hi - b.theta_lo),
-                  std::abs(cal.result.eta - eta0) / (b.eta_hi - b.eta_lo));
+  rec.move = std::max(std::abs(rec.theta - theta0) / (b.theta_hi - b.theta_lo),
+                      std::abs(rec.eta - eta0) / (b.eta_hi - b.eta_lo));
 }
 
 // Whether a stored round was run for other --where values than this fit reads (its
@@ -335,9 +350,7 @@ std::optional<RefineRound> resume_last_round(db::Store& store, const FitRequest&
                                              const RefineOptions& opt, std::ostream& log) {
   if (!opt.resume_round) return std::nullopt;
   const std::set<std::string> jobs_fitted = fitted_jobs(cal);
-  int last = 0;
-  for (const auto& job : jobs_fitted)
-    for (const auto& sub : refine_jobs_of(store, job)) last = std::max(last, refine_round(sub));
+  const int last = last_round(store, jobs_fitted);
   if (last == 0) return std::nullopt;
   std::optional<std::vector<RefinePoint>> points;
   for (const auto& job : jobs_fitted)
@@ -348,7 +361,6 @@ std::optional<RefineRound> resume_last_round(db::Store& store, const FitRequest&
   RefineRound rec;
   rec.resumed = true;
   rec.round = last;
-  const double th0 = cal.result.theta, et0 = cal.result.eta;
   nlohmann::json resumed = nlohmann::json::array();
   for (const auto& job : jobs_fitted) {
     const std::string sub = refine_job_name(job, last);
@@ -381,11 +393,8 @@ std::optional<RefineRound> resume_last_round(db::Store& store, const FitRequest&
     }
   }
   if (resumed.empty()) return std::nullopt;
-  cal = calibrate(store, req);
-  rec.ok = cal.result.ok;
-  rec.theta = cal.result.theta;
-  rec.eta = cal.result.eta;
-  rec.move = cal.result.ok ? move_of(cal, th0, et0) : kNaN;
+  refit(store, req, cal, rec);
+  if (!rec.ok) rec.move = kNaN;
   rec.fit_id = store_fit(store, req, cal, rec.round, {{"refine", {{"resumed", resumed}}}});
   log << "refine round " << rec.round << " (resumed): candidate theta = " << rec.theta << ", eta = " << rec.eta
       << " (fit " << rec.fit_id << ")\n";
@@ -401,9 +410,7 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
     if (auto r = resume_last_round(store, req, cal, opt, log)) rounds.push_back(*r);
   // Numbered on from the last stored round of any fitted job: a job is its latest
   // spec, so reusing a round's name would drop that round's runs from the surfaces.
-  int last = 0;
-  for (const auto& job : fitted_jobs(cal))
-    for (const auto& sub : refine_jobs_of(store, job)) last = std::max(last, refine_round(sub));
+  const int last = last_round(store, fitted_jobs(cal));
   for (int k = 1; k <= opt.rounds; ++k) {
     const int r = last + k;
     if (!cal.result.ok) {
@@ -421,11 +428,7 @@ std::vector<RefineRound> refine(db::Store& store, const FitRequest& req, Calibra
           << ", eta = " << et0 << " for job " << job << "\n";
       opt.run_points(store, job, r, rec.points);
     }
-    cal = calibrate(store, req);
-    rec.ok = cal.result.ok;
-    rec.theta = cal.result.theta;
-    rec.eta = cal.result.eta;
-    rec.move = move_of(cal, th0, et0);
+    refit(store, req, cal, rec);
     nlohmann::json pts = nlohmann::json::array();
     for (const auto& p : rec.points) pts.push_back({p.theta, p.eta});
     rec.fit_id = store_fit(store, req, cal, r, {{"refine", {{"points", pts}, {"move", rec.move}, {"tolerance", opt.tolerance}}}});

@@ -4,6 +4,7 @@
 #include "db/schema.hpp"
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
+#include "jobs/runner.hpp"
 #include "jobs/study.hpp"
 
 #include <algorithm>
@@ -113,12 +114,7 @@ int study(const StudyArgs& a) {
   for (const char* sub : {"", "tasks", "jobs"}) {
     if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
       continue;
-    const fs::path dir = fs::path(o.out_dir) / sub;
-    std::error_code ec;
-    fs::create_directories(dir, ec);
-    if (ec || !fs::is_directory(dir))
-      throw jobs::JobError(flag, "cannot create the folder " + dir.string() + ": " +
-                                     (ec ? ec.message() : std::string("a file of that name is in the way")));
+    jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
   }
   if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
   if (is_fidelity(a.name)) return fidelity(a, o);

@@ -1,6 +1,7 @@
 #include "packing.hpp"
 
 #include "errors.hpp"
+#include "size_distribution.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,9 +11,7 @@
 namespace demcal::engine {
 
 std::vector<double> sample_radii(std::size_t n, double d_min, double d_max, std::mt19937_64& rng) {
-  std::vector<double> r(n);
-  for (auto& x : r) x = 0.5 * uniform(rng, d_min, d_max);
-  return r;
+  return sample_radii(n, Grading{SizeDistribution::uniform, d_min, d_max}, rng);
 }
 
 void insert_random(Particles& p, std::vector<double> radii, const Vec3& lo, const Vec3& hi, double density,

@@ -339,13 +339,17 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
   return id;
 }
 
-std::string make_task_output_dir(const Job& job, const RunOptions& options) {
-  const std::string dir = task_output_dir(job, options);
+void make_folder(const std::string& dir, const std::string& flag, const std::string& what) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec || !std::filesystem::is_directory(dir))
-    throw JobError(options.out_flag, "cannot create the output folder " + dir + ": " +
-                                         (ec ? ec.message() : std::string("a file of that name is in the way")));
+    throw JobError(flag, "cannot create the " + what + " " + dir + ": " +
+                             (ec ? ec.message() : std::string("a file of that name is in the way")));
+}
+
+std::string make_task_output_dir(const Job& job, const RunOptions& options) {
+  const std::string dir = task_output_dir(job, options);
+  make_folder(dir, options.out_flag, "output folder");
   // An earlier run's folder owned by someone else: found now, not after every task
   // has run and failed to write its result.
   if (::access(dir.c_str(), W_OK) != 0)

@@ -44,6 +44,9 @@ RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
+// Creates `dir` and its parents: throws JobError(flag) naming the `what` ("folder",
+// "output folder") and why, when it cannot be made or a file is in its way.
+void make_folder(const std::string& dir, const std::string& flag, const std::string& what);
 // Creates task_output_dir before the job is recorded, so that a folder that cannot
 // be made (a file in its way, no permission) leaves the database as it was: throws
 // JobError(options.out_flag) naming the folder and the reason.

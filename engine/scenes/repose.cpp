@@ -542,11 +542,6 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     const std::vector<std::uint8_t> mobile = mobile_mask(w.particles());
     const double n_mobile = static_cast<double>(res.particles);
     const int gap_bins = static_cast<int>(std::ceil(cfg.front_max_gap * d_mean / bin));
-    auto front_now = [&]() {
-      const Particles& p = w.particles();
-      const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
-      return deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile).x;
-    };
     // The heap as the final measurement would read it now (NaN angle: no fit yet).
     auto heap_now = [&]() {
       const Particles& p = w.particles();
@@ -620,7 +615,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       std::ostringstream os;
       os << "flow kinetic energy per grain up to " << recent_flow_ke(res.energy, cfg.rest_samples) << " J over the last "
          << cfg.rest_samples << " samples, threshold " << res.rest_ke_J << " J"
-         << few_grains_moving(p, mobile, floor_level, front_now(), d_mean);
+         << few_grains_moving(p, mobile, floor_level, res.energy.rows.back()[res.energy.column("front_x")], d_mean);
       not_at_rest = os.str();
       if (cfg.rest_profile_window > 0.0) {
         still = heap_stillness(res.energy, w.time() - cfg.rest_profile_window, cfg.min_collapse_time);
