@@ -28,6 +28,7 @@ void Material::validate() const {
   positive(d_min, "material.diameter.min");
   positive(d_max, "material.diameter.max");
   if (d_min > d_max) throw ConfigError("material.diameter", "min must not exceed max");
+  if (const std::string p = grading().problem(); !p.empty()) throw ConfigError("material.diameter.grading", p);
 }
 
 std::size_t Series::column(const std::string& col) const {

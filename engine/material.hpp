@@ -21,8 +21,10 @@ struct Material {
   double d_min = 1.0e-3;        // smallest diameter [m]
   double d_max = 2.0e-3;        // largest diameter [m]
   SizeDistribution size_distribution = SizeDistribution::uniform;  // how diameters fill [d_min, d_max]
+  // A measured grading curve; [d_min, d_max] cuts it (Grading::curve). Empty: none.
+  SieveCurve grading_curve;
 
-  Grading grading() const { return {size_distribution, d_min, d_max}; }
+  Grading grading() const { return {size_distribution, d_min, d_max, grading_curve}; }
 
   void validate() const;  // throws ConfigError naming the field
 };

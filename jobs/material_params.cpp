@@ -19,11 +19,14 @@ std::vector<ParamSpec> material_params() {
       real_param("material", "b", "b", d.rolling_b).above(0),
       real_param("material", "theta_deg", "theta_deg", 0.0).at_least(0).below(90),
       real_param("material", "eta", "eta", d.rolling_eta).at_least(0),
-      real_param("material", "diameter.min", "d_min", d.d_min).above(0).at_most(1.0),
-      real_param("material", "diameter.max", "d_max", d.d_max).above(0).at_most(1.0),
+      // Their defaults are set with the grading (resolve_diameters): a measured curve
+      // without them runs from its first size to its last.
+      real_param("material", "diameter.min", "d_min", nullptr).above(0).at_most(1.0),
+      real_param("material", "diameter.max", "d_max", nullptr).above(0).at_most(1.0),
       // No fallback: a job that leaves the grading out keeps the task keys it had
       // before the field existed (uniform by number).
       choice_param("material", "diameter.distribution", "size_distribution", distributions(), nullptr),
+      curve_param("material", "diameter.grading", "grading"),
   };
 }
 
@@ -40,6 +43,10 @@ engine::Material material_from(const nlohmann::json& p) {
   // The choice is checked against the parameter's list before this runs.
   if (p.contains("size_distribution"))
     engine::parse_size_distribution(p.at("size_distribution").get<std::string>(), m.size_distribution);
+  if (p.contains("grading")) {
+    m.grading_curve.d = p.at("grading").at("d").get<std::vector<double>>();
+    for (const auto& x : p.at("grading").at("percent_finer")) m.grading_curve.finer.push_back(x.get<double>() / 100.0);
+  }
   return m;
 }
 

@@ -11,7 +11,7 @@ namespace demcal::jobs {
 
 std::vector<ParamSpec> material_params();
 // From resolved flat parameters (kn, ks, density, b, theta_deg, eta, d_min, d_max, and
-// size_distribution when a job names a grading other than the default).
+// size_distribution and grading when a job names a grading other than the default).
 engine::Material material_from(const nlohmann::json& params);
 // Engine field names ("material.friction_angle") back to job-file paths ("material.theta_deg").
 std::string job_path_of(const std::string& engine_field, const std::string& scene_section);

@@ -41,6 +41,37 @@ ParamSpec make(const std::string& section, const std::string& key, const std::st
   return s;
 }
 
+// The curve's shape and units; whether its points make a grading is the engine's to say.
+nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
+  const char* form = "{\"d\": [sizes in m, increasing], \"percent_finer\": [percent of the mass finer, 0 ... 100]}";
+  if (!v.is_object()) throw JobError(path, std::string("expected ") + form + ", got " + describe(v));
+  for (const auto& [k, x] : v.items())
+    if (k != "d" && k != "percent_finer") throw JobError(path + "." + k, std::string("unknown key (expected ") + form + ")");
+  nlohmann::json out = nlohmann::json::object();
+  for (const char* k : {"d", "percent_finer"}) {
+    const std::string at = path + "." + k;
+    if (!v.contains(k)) throw JobError(at, std::string("missing: a curve is ") + form);
+    const nlohmann::json& list = v.at(k);
+    if (!list.is_array()) throw JobError(at, "expected a list of numbers, got " + describe(list));
+    nlohmann::json vals = nlohmann::json::array();
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string ai = at + "[" + std::to_string(i) + "]";
+      if (!list[i].is_number()) throw JobError(ai, "expected a number, got " + describe(list[i]));
+      const double x = list[i].get<double>();
+      if (!std::isfinite(x)) throw JobError(ai, "must be finite, got " + list[i].dump());
+      if (std::string(k) == "d" && !(x > 0.0 && x <= 1.0)) throw JobError(ai, "a size must be in (0, 1] m, got " + fmt(x));
+      if (std::string(k) == "percent_finer" && !(x >= 0.0 && x <= 100.0))
+        throw JobError(ai, "must be in [0, 100] percent, got " + fmt(x));
+      vals.push_back(x);
+    }
+    out[k] = std::move(vals);
+  }
+  if (out["d"].size() != out["percent_finer"].size())
+    throw JobError(path, "d has " + std::to_string(out["d"].size()) + " sizes and percent_finer " +
+                             std::to_string(out["percent_finer"].size()) + " values: give one percentage per size");
+  return out;
+}
+
 std::size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
   for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
@@ -73,6 +104,10 @@ ParamSpec choice_param(const std::string& section, const std::string& key, const
   return s;
 }
 
+ParamSpec curve_param(const std::string& section, const std::string& key, const std::string& name) {
+  return make(section, key, name, ParamType::curve, nullptr);
+}
+
 std::string describe(const nlohmann::json& v) {
   switch (v.type()) {
     case nlohmann::json::value_t::null: return "null";
@@ -86,6 +121,7 @@ std::string describe(const nlohmann::json& v) {
 
 nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const std::string& path) {
   switch (s.type) {
+    case ParamType::curve: return check_curve(v, path);
     case ParamType::boolean:
       if (!v.is_boolean()) throw JobError(path, "expected true or false, got " + describe(v));
       return v;

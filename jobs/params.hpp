@@ -10,7 +10,8 @@
 
 namespace demcal::jobs {
 
-enum class ParamType { real, integer, boolean, choice };
+// curve: a measured curve, {"d": [sizes], "percent_finer": [percents]} (the grading).
+enum class ParamType { real, integer, boolean, choice, curve };
 
 struct ParamSpec {
   std::string section;  // "material" or the scene's section
@@ -39,6 +40,7 @@ ParamSpec int_param(const std::string& section, const std::string& key, const st
 ParamSpec bool_param(const std::string& section, const std::string& key, const std::string& name, bool fallback);
 ParamSpec choice_param(const std::string& section, const std::string& key, const std::string& name,
                        std::vector<std::string> choices, nlohmann::json fallback);
+ParamSpec curve_param(const std::string& section, const std::string& key, const std::string& name);
 
 // Checks one scalar against its declaration and returns it in canonical form
 // (reals as double, integers as int64), so equal values hash to equal keys.

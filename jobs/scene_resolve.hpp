@@ -12,9 +12,10 @@ namespace demcal::jobs {
 // takes `default_factor`.
 void resolve_time_step(nlohmann::json& params, const std::string& section, double default_factor);
 
-// material.diameter: min must not exceed max; a distribution named "uniform" is the
-// default and is dropped, so that a job that writes it out keeps the keys (and the
-// --where matches) of one that leaves it out.
+// material.diameter: min and max default to the engine's (or to a grading curve's
+// first and last size) and min must not exceed max; a distribution named "uniform" is
+// the default and is dropped, so that a job that writes it out keeps the keys (and
+// the --where matches) of one that leaves it out; a curve must make a grading.
 void resolve_diameters(nlohmann::json& params);
 
 // Rethrows the engine's ConfigError as a JobError at `job_path` (the job-file

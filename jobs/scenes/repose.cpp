@@ -142,10 +142,8 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     // mean diameter it would be thinner than the periodic images allow.
     double depth = pre.depth_diameters;
     if (p.contains("size_distribution")) {
-      engine::SizeDistribution s = engine::SizeDistribution::uniform;
-      engine::parse_size_distribution(p["size_distribution"].get<std::string>(), s);
       const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
-      depth *= 0.5 * (d0 + d1) / engine::Grading{s, d0, d1}.mean();
+      depth *= 0.5 * (d0 + d1) / material_from(p).grading().mean();
     }
     p["depth_diameters"] = depth;
   }

@@ -640,4 +640,18 @@ TEST(TriaxialScene, TheSampleIsDrawnFromTheMaterialsGrading) {
   // The three means (1.5, 1.333, 1.286 mm) are far apart next to that tolerance.
   EXPECT_GT(Grading({SizeDistribution::uniform, 1e-3, 2e-3}).mean(),
             1.1 * Grading({SizeDistribution::uniform_mass, 1e-3, 2e-3}).mean());
+  // A measured curve, whole: its smallest grain sets the time step.
+  TriaxialConfig c = short_loose(0.01, 0.005);
+  c.particles = 2000;
+  c.prep_step_budget = 10;
+  c.material.size_distribution = SizeDistribution::log_uniform_mass;
+  c.material.grading_curve = {{0.6e-3, 1e-3, 1.4e-3, 2e-3, 2.36e-3}, {0, 0.1, 0.55, 0.95, 1}};
+  c.material.d_min = 0.6e-3;
+  c.material.d_max = 2.36e-3;
+  const TriaxialResult r = run_triaxial(c);
+  EXPECT_FALSE(r.outcome.ok());
+  // This curve's diameters spread by 32% of their mean (0.34 of 1.07 mm): the mean of
+  // 2,000 draws has a standard error of 0.7%.
+  EXPECT_NEAR(r.d_mean / c.material.grading().mean(), 1.0, 0.03) << r.d_mean;
+  EXPECT_LT(c.material.grading().mean(), 1.2e-3);  // 1.07 mm by number, far below the range's middle (1.48)
 }

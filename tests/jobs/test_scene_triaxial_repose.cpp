@@ -9,6 +9,8 @@
 #include "jobs/runner.hpp"
 #include "jobs/scene_registry.hpp"
 
+#include "jobs/material_params.hpp"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -191,6 +193,93 @@ TEST(TriaxialReposeScenes, AGradingIsATaskParameterAndAGridAxis) {
     const demcal::engine::Grading grading{s, 1e-3, 2e-3};
     EXPECT_NEAR(rep.tasks[0].params["depth_diameters"].get<double>() * grading.mean(), d_uniform, 1e-12) << g;
   }
+}
+
+// A sand's sieve analysis: sizes in m, percent of the mass finer.
+json sand_curve() {
+  return {{"d", {0.0006, 0.001, 0.00118, 0.0014, 0.0017, 0.002, 0.00236}},
+          {"percent_finer", {0, 10, 25, 55, 80, 95, 100}}};
+}
+
+TEST(TriaxialReposeScenes, AMeasuredGradingCurveRunsFromItsFirstSizeToItsLastOrIsCut) {
+  json j = triaxial_base();
+  j["material"]["diameter"] = {{"grading", sand_curve()}};
+  const Job whole = parse(j);
+  const json& p = whole.tasks[0].params;
+  EXPECT_EQ(p["d_min"].get<double>(), 0.0006);
+  EXPECT_EQ(p["d_max"].get<double>(), 0.00236);
+  EXPECT_EQ(p["size_distribution"], "log_uniform_mass");  // a sieve chart's straight lines
+  const demcal::engine::Material m = demcal::jobs::material_from(p);
+  ASSERT_EQ(m.grading_curve.finer.size(), 7u);
+  EXPECT_EQ(m.grading_curve.finer[2], 0.25);
+  EXPECT_EQ(m.grading_curve.finer.back(), 1.0);
+  EXPECT_NEAR(m.grading().finer_by_mass(0.0014), 0.55, 1e-15);
+
+  // Cut to [1, 2] mm, the range the seed's simulations afford: renormalised.
+  j["material"]["diameter"]["min"] = 0.001;
+  j["material"]["diameter"]["max"] = 0.002;
+  const Job cut = parse(j);
+  EXPECT_EQ(cut.tasks[0].params["d_min"].get<double>(), 0.001);
+  EXPECT_NEAR(demcal::jobs::material_from(cut.tasks[0].params).grading().finer_by_mass(0.0014), 45.0 / 85.0, 1e-15);
+  EXPECT_NE(cut.tasks[0].key, whole.tasks[0].key);
+  // Straight lines in d instead, when the job says so: another grading, another key.
+  j["material"]["diameter"]["distribution"] = "uniform_mass";
+  EXPECT_NE(parse(j).tasks[0].key, cut.tasks[0].key);
+
+  // Two measured curves as a grid axis.
+  j = triaxial_base();
+  json finer = sand_curve();
+  finer["percent_finer"] = {0, 30, 50, 70, 85, 95, 100};
+  j["grid"] = {{"grading", {sand_curve(), finer}}};
+  const Job two = parse(j);
+  ASSERT_EQ(two.tasks.size(), 2u);
+  EXPECT_NE(two.tasks[0].key, two.tasks[1].key);
+  EXPECT_LT(demcal::jobs::material_from(two.tasks[1].params).grading().mean(),
+            demcal::jobs::material_from(two.tasks[0].params).grading().mean());
+
+  // A job without a curve keeps the engine's range (and its keys: Grid.* and the examples).
+  const Job plain = parse(triaxial_base());
+  EXPECT_EQ(plain.tasks[0].params["d_min"].get<double>(), 0.001);
+  EXPECT_EQ(plain.tasks[0].params["d_max"].get<double>(), 0.002);
+  EXPECT_FALSE(plain.tasks[0].params.contains("grading"));
+}
+
+TEST(TriaxialReposeScenes, AGradingCurveThatIsNotOneSaysWhereAndWhy) {
+  const auto with = [](const std::function<void(json&)>& edit) {
+    json j = triaxial_base();
+    j["material"]["diameter"] = {{"grading", sand_curve()}};
+    edit(j);
+    return error_of(j);
+  };
+  const auto starts = [](const std::string& msg, const std::string& field, const std::string& words) {
+    return msg.rfind(field, 0) == 0 && msg.find(words) != std::string::npos;
+  };
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"] = json::array({1, 2}); }),
+               "material.diameter.grading", "expected {\"d\"");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"].erase("percent_finer"); }),
+               "material.diameter.grading.percent_finer", "missing");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["passing"] = 1; }),
+               "material.diameter.grading.passing", "unknown key");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"][3] = "1.4 mm"; }),
+               "material.diameter.grading.d[3]", "expected a number");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"][3] = 1.4; }),
+               "material.diameter.grading.d[3]", "(0, 1] m");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][2] = 0.25; }),
+               "material.diameter.grading", "point 3 (d = 0.00118 m): the fraction finer must not decrease");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][6] = 120; }),
+               "material.diameter.grading.percent_finer[6]", "[0, 100] percent");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"].erase(6); }),
+               "material.diameter.grading", "one percentage per size");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"][2] = 0.0009; }),
+               "material.diameter.grading", "point 3 (d = 0.0009 m): sizes must increase");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][6] = 99; }),
+               "material.diameter.grading", "100%");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["distribution"] = "uniform"; }),
+               "material.diameter.distribution", "log_uniform_mass");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["min"] = 0.0005; }),
+               "material.diameter.grading", "within the curve's sizes");
+  EXPECT_PRED3(starts, with([](json& j) { j["grid"] = {{"grading", {sand_curve(), 3}}}; }), "grid.grading[1]",
+               "expected {\"d\"");
 }
 
 TEST(TriaxialReposeScenes, SideWallsBetweenWallsMayBeThinnerThanThePeriodicSlab) {
