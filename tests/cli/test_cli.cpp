@@ -207,6 +207,27 @@ TEST(Cli, QueryHeadersAreUniqueAndFitSaysNoDataFirst) {
   EXPECT_EQ(r.err.find("--where"), std::string::npos) << r.err;
 }
 
+TEST(Cli, GradingCurvesAreAGridAxisAndAWhereValue) {
+  TempDir d;
+  const nlohmann::json fine = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 40, 100}}};
+  const nlohmann::json coarse = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 10, 100}}};
+  nlohmann::json j = nlohmann::json::parse(collision_job("curves", {0.1}));
+  j["material"]["diameter"] = nlohmann::json::object();
+  j["grid"] = {{"grading", {fine, coarse}}};
+  write(d.file("j.json"), j.dump());
+  Result r = run_demcal({"run", "j.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  // Written as the job wrote it (integers), matched to the stored reals.
+  r = run_demcal({"query", "--format", "json", "--where", "grading=" + coarse.dump()}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const nlohmann::json rows = nlohmann::json::parse(r.out);
+  ASSERT_EQ(rows.size(), 1u) << r.out;
+  EXPECT_EQ(rows[0]["params"]["grading"]["percent_finer"][1], 10.0);
+  EXPECT_EQ(rows[0]["params"]["d_min"], 0.0006);
+  r = run_demcal({"query", "--where", "grading={\"d\": [0.0006, 0.002], \"percent_finer\": [0, 100]}"}, d.path.string());
+  EXPECT_NE((r.out + r.err).find("no task matches"), std::string::npos) << r.out << r.err;
+}
+
 TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
   TempDir d;
   json j = json::parse(collision_job("snap", {0.1}));
