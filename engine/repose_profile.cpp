@@ -203,4 +203,36 @@ MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vec
   return c;
 }
 
+HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<double>& front_x,
+                             const std::vector<double>& angle_deg, double from, double earliest) {
+  HeapStillness h;
+  if (from < earliest) {
+    h.why = "its window starts before min_collapse_time";
+    return h;
+  }
+  double a_lo = INFINITY, a_hi = -INFINITY;
+  std::vector<double> fronts;
+  for (std::size_t i = 0; i < time.size(); ++i) {
+    if (time[i] < from) continue;
+    if (!std::isfinite(angle_deg[i])) {
+      h.why = "no slope could be fitted to it at " + std::to_string(time[i]) + " s";
+      return h;
+    }
+    if (fronts.empty()) h.since = time[i];
+    a_lo = std::min(a_lo, angle_deg[i]), a_hi = std::max(a_hi, angle_deg[i]);
+    fronts.push_back(front_x[i]);
+  }
+  if (fronts.size() < 3) {
+    h.why = "its window holds fewer than three samples";
+    return h;
+  }
+  h.judged = true;
+  h.angle_change_deg = a_hi - a_lo;
+  const long third = static_cast<long>(fronts.size() / 3);
+  h.front_change_m = std::abs(*std::min_element(fronts.end() - third, fronts.end()) -
+                              *std::min_element(fronts.begin(), fronts.begin() + third));
+  h.front_excursion_m = *std::max_element(fronts.begin(), fronts.end()) - *std::min_element(fronts.begin(), fronts.end());
+  return h;
+}
+
 }  // namespace demcal::engine

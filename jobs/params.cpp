@@ -41,6 +41,8 @@ ParamSpec make(const std::string& section, const std::string& key, const std::st
   return s;
 }
 
+constexpr std::size_t kMaxCurvePoints = 1000;
+
 // The curve's shape and units; whether its points make a grading is the engine's to say.
 nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
   const char* form = "{\"d\": [sizes in m, increasing], \"percent_finer\": [percent of the mass finer, 0 ... 100]}";
@@ -53,6 +55,10 @@ nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
     if (!v.contains(k)) throw JobError(at, std::string("missing: a curve is ") + form);
     const nlohmann::json& list = v.at(k);
     if (!list.is_array()) throw JobError(at, "expected a list of numbers, got " + describe(list));
+    // Each grain's draw walks the curve's pieces; a sieve analysis has tens of sizes.
+    if (list.size() > kMaxCurvePoints)
+      throw JobError(at, std::to_string(list.size()) + " points, more than the " + std::to_string(kMaxCurvePoints) +
+                             " a grading curve may have");
     nlohmann::json vals = nlohmann::json::array();
     for (std::size_t i = 0; i < list.size(); ++i) {
       const std::string ai = at + "[" + std::to_string(i) + "]";

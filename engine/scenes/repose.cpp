@@ -87,46 +87,6 @@ std::string few_grains_moving(const Particles& p, const std::vector<std::uint8_t
   return os.str();
 }
 
-// How far the heap moved over the collapse series' rows from time `from` on, read
-// from their front and angle columns. Not judged (and `why` says so) when the window
-// would start before `earliest`, holds fewer than two rows, or a row in it has no
-// angle (no heap to fit).
-struct HeapStillness {
-  bool judged = false;
-  std::string why;
-  double since = 0;  // time of the window's first row
-  double angle_change_deg = 0, front_change_m = 0;
-};
-HeapStillness heap_stillness(const Series& energy, double from, double earliest) {
-  HeapStillness h;
-  if (from < earliest) {
-    h.why = "its window starts before min_collapse_time";
-    return h;
-  }
-  const std::size_t t = energy.column("time"), f = energy.column("front_x"), a = energy.column("repose_deg");
-  double a_lo = INFINITY, a_hi = -INFINITY, f_lo = INFINITY, f_hi = -INFINITY;
-  int rows = 0;
-  for (const auto& row : energy.rows) {
-    if (row[t] < from) continue;
-    if (!std::isfinite(row[a])) {
-      h.why = "no slope could be fitted to it at " + std::to_string(row[t]) + " s";
-      return h;
-    }
-    if (rows == 0) h.since = row[t];
-    a_lo = std::min(a_lo, row[a]), a_hi = std::max(a_hi, row[a]);
-    f_lo = std::min(f_lo, row[f]), f_hi = std::max(f_hi, row[f]);
-    ++rows;
-  }
-  if (rows < 2) {
-    h.why = "its window holds fewer than two samples";
-    return h;
-  }
-  h.judged = true;
-  h.angle_change_deg = a_hi - a_lo;
-  h.front_change_m = f_hi - f_lo;
-  return h;
-}
-
 // The largest flow kinetic energy of the last `n` samples: the rest test needs all
 // of them below the threshold, so the last one alone may read quiet.
 double recent_flow_ke(const Series& energy, int n) {
@@ -618,7 +578,13 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
          << few_grains_moving(p, mobile, floor_level, res.energy.rows.back()[res.energy.column("front_x")], d_mean);
       not_at_rest = os.str();
       if (cfg.rest_profile_window > 0.0) {
-        still = heap_stillness(res.energy, w.time() - cfg.rest_profile_window, cfg.min_collapse_time);
+        const auto col = [&](const char* name) {
+          std::vector<double> v;
+          for (const auto& row : res.energy.rows) v.push_back(row[res.energy.column(name)]);
+          return v;
+        };
+        still = heap_stillness(col("time"), col("front_x"), col("repose_deg"), w.time() - cfg.rest_profile_window,
+                               cfg.min_collapse_time);
         std::ostringstream note;
         if (still.judged) {
           res.profile_angle_change_deg = still.angle_change_deg;
@@ -626,7 +592,10 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
           res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
           note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
                << still.angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
-               << still.front_change_m << " m (tolerance one bin, " << bin << " m)";
+               << still.front_change_m << " m (its lowest over the window's last third against its first; tolerance one bin, "
+               << bin << " m)";
+          if (still.front_excursion_m > still.front_change_m + 1e-12)
+            note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";
         } else {
           note << "the heap's profile was not judged: " << still.why;
         }

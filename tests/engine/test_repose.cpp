@@ -228,6 +228,49 @@ TEST(ReposeProfile, MotionCarriersTellAFewRattlersFromAFlow) {
   EXPECT_EQ(motion_carriers(v, m, include).fastest, -1);
 }
 
+TEST(ReposeProfile, AHeapIsStillThoughAGrainHopsAtItsToeButNotWhileItsToeCreeps) {
+  // 100 samples over 0.5 s, the angle steady; the front at 29.1 mm but for a grain
+  // hopping 3.8 mm beyond it for 30 samples in the middle (as a quick repose heap
+  // measured) and two single-sample hops near the ends.
+  std::vector<double> t, front, angle;
+  for (int i = 0; i < 100; ++i) {
+    t.push_back(1.0 + 0.005 * i);
+    front.push_back(i >= 30 && i < 60 ? 0.0329 : 0.0291);
+    angle.push_back(24.0 + 1e-7 * i);
+  }
+  front[2] = front[97] = 0.0329;
+  HeapStillness h = heap_stillness(t, front, angle, 1.0, 0.4);
+  ASSERT_TRUE(h.judged) << h.why;
+  EXPECT_EQ(h.since, 1.0);
+  EXPECT_EQ(h.front_change_m, 0.0);
+  EXPECT_NEAR(h.front_excursion_m, 0.0038, 1e-12);
+  EXPECT_NEAR(h.angle_change_deg, 99e-7, 1e-12);
+
+  // A grain bouncing beyond the toe every few samples, about half of the time (as
+  // another heap measured): the toe has not moved.
+  for (int i = 0; i < 100; ++i) front[i] = i % 5 < 2 ? 0.0355 : 0.0317;
+  h = heap_stillness(t, front, angle, 1.0, 0.4);
+  ASSERT_TRUE(h.judged);
+  EXPECT_EQ(h.front_change_m, 0.0);
+  EXPECT_NEAR(h.front_excursion_m, 0.0038, 1e-12);
+
+  // A toe creeping by 3 mm across the window moves its lower envelope by ~2 mm, hops or not.
+  for (int i = 0; i < 100; ++i) front[i] = 0.0291 + 0.003 * i / 99.0 + (i % 5 < 2 ? 0.0038 : 0.0);
+  h = heap_stillness(t, front, angle, 1.0, 0.4);
+  ASSERT_TRUE(h.judged);
+  EXPECT_NEAR(h.front_change_m, 0.003 * 67.0 / 99.0, 1e-4);
+
+  // Only the window counts; too short a window, or one without a heap, is not judged.
+  for (int i = 0; i < 100; ++i) front[i] = 0.0291 + 0.003 * i / 99.0;
+  h = heap_stillness(t, front, angle, 1.479, 0.4);  // the last four samples
+  ASSERT_TRUE(h.judged) << h.why;
+  EXPECT_LT(h.front_change_m, 0.0003);
+  EXPECT_EQ(heap_stillness(t, front, angle, 1.492, 0.4).why, "its window holds fewer than three samples");
+  EXPECT_EQ(heap_stillness(t, front, angle, 0.3, 0.4).why, "its window starts before min_collapse_time");
+  angle[50] = NAN;
+  EXPECT_NE(heap_stillness(t, front, angle, 1.0, 0.4).why.find("no slope could be fitted"), std::string::npos);
+}
+
 TEST(ReposeProfile, TooFewPointsIsNoFit) {
   const SlopeFit f = fit_slope({0.0, 0.001}, {0.01, 0.0}, 0.2, 0.8);
   EXPECT_FALSE(f.ok);

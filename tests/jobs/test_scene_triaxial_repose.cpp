@@ -278,6 +278,8 @@ TEST(TriaxialReposeScenes, AGradingCurveThatIsNotOneSaysWhereAndWhy) {
                "material.diameter.distribution", "log_uniform_mass");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["min"] = 0.0005; }),
                "material.diameter.grading", "within the curve's sizes");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"] = std::vector<double>(1001, 1e-3); }),
+               "material.diameter.grading.d", "more than the 1000");
   EXPECT_PRED3(starts, with([](json& j) { j["grid"] = {{"grading", {sand_curve(), 3}}}; }), "grid.grading[1]",
                "expected {\"d\"");
 }
