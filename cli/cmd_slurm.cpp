@@ -31,6 +31,20 @@ std::string quote(const std::string& text) {
   return q + "'";
 }
 
+// The shards' log pattern for an #SBATCH --output line. sbatch reads a directive's
+// argument up to a blank unless it is quoted, takes backslash escapes, ends it at an
+// unquoted '#', and expands '%' patterns; so the folder is double-quoted with quotes and
+// backslashes escaped and '%' doubled, and a project folder like "My Runs" works.
+std::string sbatch_output_line(const fs::path& parts) {
+  std::string q = "\"";
+  for (char c : parts.string()) {
+    if (c == '"' || c == '\\') q += '\\';
+    if (c == '%') q += '%';
+    q += c;
+  }
+  return "#SBATCH --output=" + q + "/slurm-%x-%A_%a.out\"";
+}
+
 void check_token(const std::string& option, const std::string& value, const char* pattern, const char* what) {
   if (!value.empty() && !std::regex_match(value, std::regex(pattern)))
     throw jobs::JobError(option, std::string("expected ") + what + ", got \"" + value + "\"");
@@ -68,7 +82,7 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
   if (!a.time.empty()) s << "#SBATCH --time=" << a.time << "\n";
   s << "#SBATCH --ntasks=1\n"
     << "#SBATCH --cpus-per-task=" << a.cpus << "\n"
-    << "#SBATCH --output=" << (parts / "slurm-%x-%A_%a.out").string() << "\n"
+    << sbatch_output_line(parts) << "\n"
     << "set -euo pipefail\n"
     << "DEMCAL=" << quote(demcal) << "\n"
     << "JOB=" << quote(fs::absolute(a.job).string()) << "\n"
@@ -130,7 +144,7 @@ int slurm(SlurmArgs a) {
   if (a.out.empty()) a.out = "demcal-" + job.name + ".slurm.sh";
   require_writable_file("--out", a.out);
   // The script runs in the database's folder and writes the parts beside it: both
-  // must exist when it runs, and a #SBATCH line cannot carry a path with blanks.
+  // must exist when it runs.
   require_writable_file("--db", a.db);
   // The merge at the end must be able to take the shards: a file that is not a
   // demcal database (or is corrupt, or newer) is refused now, not after every shard ran.
@@ -138,10 +152,6 @@ int slurm(SlurmArgs a) {
   const fs::path parts = parts_folder(a);
   if (fs::exists(parts) && !fs::is_directory(parts))
     throw jobs::JobError(a.parts.empty() ? "--db" : "--parts", parts.string() + " exists and is not a folder (the shards' databases go there)");
-  if (parts.string().find_first_of(" \t") != std::string::npos)
-    throw jobs::JobError(a.parts.empty() ? "--db" : "--parts",
-                         "the parts folder " + parts.string() +
-                             " has a blank in its path, which a #SBATCH --output line cannot carry; choose another");
   if (!a.demcal.empty() && !fs::exists(a.demcal))
     throw jobs::JobError("--demcal", "no such file: " + fs::absolute(a.demcal).string());
   if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))

@@ -220,11 +220,20 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
   r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "nodir/x.db", "--out", "bad.sh"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--db: the folder"), std::string::npos) << r.err;
-  fs::create_directories(d.path / "my runs");
-  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "my runs/x.db", "--out", "bad.sh"}, d.path.string());
-  EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("has a blank in its path"), std::string::npos) << r.err;
-  EXPECT_FALSE(fs::exists(d.file("bad.sh")));
+  // A project folder with a blank, a '%' and a '"' in its name: the #SBATCH line
+  // quotes it as sbatch parses directives (quotes group, backslash escapes, '%%' is
+  // a literal '%' in --output), and the steps run there.
+  const std::string odd = "my 100% \"runs\"";
+  fs::create_directories(d.path / odd);
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", odd + "/x.db", "--out", "odd.sh"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string parts = fs::absolute(d.path / odd / "parts").string();
+  const std::string want = "#SBATCH --output=\"" + parts.substr(0, parts.size() - (odd.size() + 6)) +
+                           "my 100%% \\\"runs\\\"/parts/slurm-%x-%A_%a.out\"\n";
+  EXPECT_NE(slurp(d.file("odd.sh")).find(want), std::string::npos) << want << "\n" << slurp(d.file("odd.sh"));
+  r = run_bash("bash odd.sh shard", d.path.string(), {{"SLURM_ARRAY_TASK_ID", "2"}});
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_TRUE(fs::exists(d.path / odd / "parts" / "part-2.db"));
   // A relative --demcal is written absolute: the script runs it from the database's folder.
   fs::create_directories(d.path / "sub");
   fs::copy_file(DEMCAL_BIN, d.file("sub/demcal"));
