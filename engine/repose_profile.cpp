@@ -228,9 +228,16 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
   }
   h.judged = true;
   h.angle_change_deg = a_hi - a_lo;
-  const long third = static_cast<long>(fronts.size() / 3);
-  h.front_change_m = std::abs(*std::min_element(fronts.end() - third, fronts.end()) -
-                              *std::min_element(fronts.begin(), fronts.begin() + third));
+  // The lowest front of each sixth of the window (of each sample in a shorter one).
+  const std::size_t n = fronts.size(), parts = std::min<std::size_t>(6, n);
+  double lo = INFINITY, hi = -INFINITY;
+  for (std::size_t k = 0; k < parts; ++k) {
+    const auto first = fronts.begin() + static_cast<long>(k * n / parts);
+    const auto last = fronts.begin() + static_cast<long>((k + 1) * n / parts);
+    const double envelope = *std::min_element(first, last);
+    lo = std::min(lo, envelope), hi = std::max(hi, envelope);
+  }
+  h.front_change_m = hi - lo;
   h.front_excursion_m = *std::max_element(fronts.begin(), fronts.end()) - *std::min_element(fronts.begin(), fronts.end());
   return h;
 }

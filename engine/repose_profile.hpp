@@ -95,18 +95,20 @@ MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vec
 // `earliest`, holds fewer than three samples, or a sample in it has no angle (no heap
 // to fit).
 //
-// The front is judged by its lowest value over the window's first and last thirds. A
-// grain hopping at the toe, within the front's gap tolerance, sets the front for the
-// samples it is beyond it (seen: 3.8 and 10 mm, in and out every few samples, while
-// the fitted angle moved by 1e-7 deg), and nothing damps such grains; but a hop only
-// ever moves the front outward, so the heap's own toe is the front's lower envelope.
-// A toe that creeps moves that envelope.
+// The front is judged by its lower envelope: its lowest value in each sixth of the
+// window, and how far those six values spread. A grain hopping at the toe, within the
+// front's gap tolerance, sets the front for the samples it is beyond it (seen: 3.8
+// and 10 mm, single samples or two in every five, while the fitted angle moved by
+// 1e-7 deg), and nothing damps such grains; but a hop only ever moves the front
+// outward, so the heap's own toe is the envelope. A toe that creeps or retreats moves
+// it, unless it does so only within the window's last sixth; a grain that stays
+// beyond the toe for a whole sixth moves it too (and the heap is not judged at rest).
 struct HeapStillness {
   bool judged = false;
   std::string why;
   double since = 0;  // time of the window's first sample
   double angle_change_deg = 0;   // the angle's range over the window
-  double front_change_m = 0;     // between the lowest fronts of the first and last thirds
+  double front_change_m = 0;     // spread of the lowest fronts of the window's sixths
   double front_excursion_m = 0;  // the front's whole range over the window, excursions included
 };
 HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<double>& front_x,

@@ -81,7 +81,7 @@ std::string SieveCurve::problem() const {
     if (!std::isfinite(d[i]) || d[i] <= 0.0) return at + "the size must be a finite number > 0";
     if (!std::isfinite(finer[i]) || finer[i] < 0.0 || finer[i] > 1.0) return at + "the fraction finer must lie in [0, 1]";
     if (i > 0 && !(d[i] > d[i - 1])) return at + "sizes must increase from one point to the next";
-    if (i > 0 && finer[i] < finer[i - 1]) return at + "the fraction finer must not decrease as the size grows";
+    if (i > 0 && finer[i] < finer[i - 1]) return at + "the mass finer must not decrease as the size grows";
   }
   if (finer.front() != 0.0) return "the first size must have nothing finer (0%): it is the smallest grain";
   if (finer.back() != 1.0) return "the last size must have everything finer (100%): it is the largest grain";
@@ -93,6 +93,7 @@ std::string Grading::problem() const {
   if (const std::string p = curve.problem(); !p.empty()) return p;
   if (kind == SizeDistribution::uniform)
     return "a curve is interpolated by mass: its distribution must be uniform_mass or log_uniform_mass";
+  if (!(d_max > d_min)) return "min and max must differ: a curve grades grains over a range of sizes";
   if (d_min < curve.d.front() || d_max > curve.d.back()) {
     std::ostringstream os;
     os << "the diameter range [" << d_min << ", " << d_max << "] m must lie within the curve's sizes, ["
@@ -133,15 +134,25 @@ std::vector<Grading::Piece> Grading::pieces() const {
   return out;
 }
 
-double Grading::draw(std::mt19937_64& rng) const {
-  if (curve.empty()) return draw_range(kind, d_min, d_max, rng);
-  const std::vector<Piece> ps = pieces();
-  const double u = uniform01(rng);
-  std::size_t k = 0;  // the first piece whose cumulative share of the grains exceeds u
-  for (double below = ps[0].number; k + 1 < ps.size() && u >= below;) below += ps[++k].number;
-  while (ps[k].number == 0.0 && k > 0) --k;  // u within rounding of 1 past empty last pieces
-  return draw_range(kind, ps[k].d_lo, ps[k].d_hi, rng);
+Grading::Sampler::Sampler(const Grading& g) : g_(&g) {
+  if (g.curve.empty()) return;
+  pieces_ = g.pieces();
+  double sum = 0;
+  for (const Piece& p : pieces_) cumulative_.push_back(sum += p.number);
 }
+
+double Grading::Sampler::operator()(std::mt19937_64& rng) const {
+  if (pieces_.empty()) return draw_range(g_->kind, g_->d_min, g_->d_max, rng);
+  const double u = uniform01(rng);
+  // The first piece whose cumulative share of the grains exceeds u; never one without
+  // grains (u within rounding of 1 past empty last pieces steps back).
+  std::size_t k = static_cast<std::size_t>(std::upper_bound(cumulative_.begin(), cumulative_.end(), u) - cumulative_.begin());
+  k = std::min(k, pieces_.size() - 1);
+  while (pieces_[k].number == 0.0 && k > 0) --k;
+  return draw_range(g_->kind, pieces_[k].d_lo, pieces_[k].d_hi, rng);
+}
+
+double Grading::draw(std::mt19937_64& rng) const { return Sampler(*this)(rng); }
 
 double Grading::mean() const {
   if (curve.empty()) return mean_range(kind, d_min, d_max);
@@ -166,8 +177,9 @@ double Grading::finer_by_mass(double d) const {
 }
 
 std::vector<double> sample_radii(std::size_t n, const Grading& g, std::mt19937_64& rng) {
+  const Grading::Sampler draw(g);
   std::vector<double> r(n);
-  for (auto& x : r) x = 0.5 * g.draw(rng);
+  for (auto& x : r) x = 0.5 * draw(rng);
   return r;
 }
 

@@ -42,7 +42,7 @@ struct Grading {
   // in d (uniform_mass) or in log d (log_uniform_mass, the sieve chart's axis).
   SieveCurve curve;
 
-  double draw(std::mt19937_64& rng) const;  // one diameter
+  double draw(std::mt19937_64& rng) const;  // one diameter (a Sampler for many)
   double mean() const;                      // number mean of d
   double mean_cube() const;                 // number mean of d^3 (mean grain volume = pi/6 of it)
   double finer_by_mass(double d) const;     // fraction of the mass in grains smaller than d
@@ -55,6 +55,19 @@ struct Grading {
   };
   std::vector<Piece> pieces() const;  // one piece [d_min, d_max] without a curve
   std::string problem() const;         // why the curve cannot give this grading, or ""
+
+  // Draws diameters with the curve's pieces worked out once, not per grain. Holds a
+  // pointer to the grading, which must outlive it.
+  class Sampler {
+   public:
+    explicit Sampler(const Grading& g);
+    double operator()(std::mt19937_64& rng) const;
+
+   private:
+    const Grading* g_;
+    std::vector<Piece> pieces_;
+    std::vector<double> cumulative_;  // share of the grains up to and including each piece
+  };
 
  private:
   double curve_finer(double d) const;  // the curve interpolated at d, not renormalised

@@ -187,6 +187,18 @@ void note_advice(const SceneDef& scene, Job& job) {
   }
 }
 
+// An error a scene's resolve() blames on a parameter the grid varies points at the
+// value in the list that this task took ("grid.grading[1]"), not at the section's key.
+std::string axis_value_path(const SceneDef& scene, const ParamSet& set, const std::string& path,
+                            const nlohmann::json& given) {
+  for (const auto& a : set.axes)
+    for (const auto& spec : scene.params)
+      if (spec.name == a.name && spec.path() == path && given.contains(a.name))
+        for (std::size_t k = 0; k < a.values.size(); ++k)
+          if (a.values[k] == given[a.name]) return a.path + "[" + std::to_string(k) + "]";
+  return path;
+}
+
 void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
   const ParamSet set = read_params(j, scene);
   for (const auto& a : set.axes) job.axes.push_back(a.name);
@@ -196,11 +208,12 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     throw JobError("grid", "expands to " + std::to_string(n) + " tasks, more than the limit of " + std::to_string(kMaxTasks));
   std::vector<nlohmann::json> params = expand(set, job.replicas, job.seed);
   for (std::size_t i = 0; i < params.size(); ++i) {
+    const nlohmann::json given = params[i];
     try {
       scene.resolve(params[i], job.fidelity);
     } catch (const JobError& e) {
       const std::string where = params.size() > 1 ? " (task " + std::to_string(i) + " of the grid)" : "";
-      throw JobError(e.path(), e.reason() + where);
+      throw JobError(axis_value_path(scene, set, e.path(), given), e.reason() + where);
     }
     Task t;
     t.index = i;

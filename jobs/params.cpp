@@ -55,7 +55,9 @@ nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
     if (!v.contains(k)) throw JobError(at, std::string("missing: a curve is ") + form);
     const nlohmann::json& list = v.at(k);
     if (!list.is_array()) throw JobError(at, "expected a list of numbers, got " + describe(list));
-    // Each grain's draw walks the curve's pieces; a sieve analysis has tens of sizes.
+    if (list.size() < 2)
+      throw JobError(at, "a curve needs at least two points, the smallest size (0% finer) and the largest (100%)");
+    // Sampling walks the curve's pieces; a sieve analysis has tens of sizes.
     if (list.size() > kMaxCurvePoints)
       throw JobError(at, std::to_string(list.size()) + " points, more than the " + std::to_string(kMaxCurvePoints) +
                              " a grading curve may have");

@@ -247,7 +247,11 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
   bool numeric = false;
   for (const auto& r : all) {
     if (!r.params.contains(w.key)) continue;
-    if (!r.params[w.key].is_number()) return;
+    const nlohmann::json& v = r.params[w.key];
+    if ((v.is_object() || v.is_array()) && nlohmann::json::parse(w.value, nullptr, false).is_discarded())
+      throw JobError("--where", w.key + " is a list or object (as the job file writes it); give it as JSON, e.g. " +
+                                    w.key + "='{\"d\": [...], ...}'; got \"" + w.value + "\", which is not JSON");
+    if (!v.is_number()) return;
     numeric = true;
   }
   if (numeric && !parse_number(w.value, d))

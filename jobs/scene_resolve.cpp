@@ -20,11 +20,24 @@ void resolve_diameters(nlohmann::json& p) {
       throw JobError("material.diameter.distribution",
                      "\"uniform\" draws by number; a grading curve gives mass, so its points are joined by "
                      "\"log_uniform_mass\" (straight in log d, the default with a curve) or \"uniform_mass\" (straight in d)");
-    // Without min and max the curve runs from its first size to its last; with them it
-    // is cut to [min, max] (a wide measured grading, scalped to what a simulation affords).
+    // Without min and max the grains run from the largest size with nothing finer to
+    // the smallest with everything finer (a sieve report lists 0% at several fine
+    // sieves; the smallest grain sets the time step). With them the curve is cut to
+    // [min, max] (a wide measured grading, scalped to what a simulation affords).
     const nlohmann::json& d = p["grading"]["d"];
-    if (!p.contains("d_min")) p["d_min"] = d.front();
-    if (!p.contains("d_max")) p["d_max"] = d.back();
+    const nlohmann::json& pf = p["grading"]["percent_finer"];
+    std::size_t lo = 0, hi = d.size() - 1;
+    while (lo + 1 < d.size() && pf[lo + 1].get<double>() == 0.0) ++lo;
+    while (hi > lo + 1 && pf[hi - 1].get<double>() == 100.0) --hi;
+    const bool min_given = p.contains("d_min"), max_given = p.contains("d_max");
+    if (!min_given) p["d_min"] = d[lo];
+    if (!max_given) p["d_max"] = d[hi];
+    if (min_given != max_given && p["d_min"].get<double>() >= p["d_max"].get<double>())
+      throw JobError(min_given ? "material.diameter.min" : "material.diameter.max",
+                     (min_given ? "must be below " : "must exceed ") + std::string("the curve's ") +
+                         (min_given ? "smallest size with everything finer, " + p["d_max"].dump()
+                                    : "largest size with nothing finer, " + p["d_min"].dump()) +
+                         " m; got " + p[min_given ? "d_min" : "d_max"].dump());
   } else {
     const engine::Material m;
     if (!p.contains("d_min")) p["d_min"] = m.d_min;

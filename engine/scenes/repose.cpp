@@ -345,8 +345,11 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   // through Grading (or a branch between the two) rounds differently.
   if (mat.size_distribution == SizeDistribution::uniform)
     lay_floor([&] { return uniform(rng, mat.d_min, mat.d_max); });
-  else
-    lay_floor([&, grading = mat.grading()] { return grading.draw(rng); });
+  else {
+    const Grading grading = mat.grading();
+    const Grading::Sampler draw(grading);
+    lay_floor([&] { return draw(rng); });
+  }
   double floor_level = 0.0, floor_top = 0.0;
   for (std::size_t i = 0; i < floor_all.size(); ++i) {
     floor_level += 2.0 * floor_all.r[i];
@@ -592,7 +595,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
           res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
           note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
                << still.angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
-               << still.front_change_m << " m (its lowest over the window's last third against its first; tolerance one bin, "
+               << still.front_change_m << " m (its lowest in each sixth of the window; tolerance one bin, "
                << bin << " m)";
           if (still.front_excursion_m > still.front_change_m + 1e-12)
             note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";

@@ -226,6 +226,9 @@ TEST(Cli, GradingCurvesAreAGridAxisAndAWhereValue) {
   EXPECT_EQ(rows[0]["params"]["d_min"], 0.0006);
   r = run_demcal({"query", "--where", "grading={\"d\": [0.0006, 0.002], \"percent_finer\": [0, 100]}"}, d.path.string());
   EXPECT_NE((r.out + r.err).find("no task matches"), std::string::npos) << r.out << r.err;
+  r = run_demcal({"query", "--where", "grading={d: [0.0006]}"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--where: grading is a list or object"), std::string::npos) << r.err;
 }
 
 TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {

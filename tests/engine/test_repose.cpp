@@ -230,20 +230,21 @@ TEST(ReposeProfile, MotionCarriersTellAFewRattlersFromAFlow) {
 
 TEST(ReposeProfile, AHeapIsStillThoughAGrainHopsAtItsToeButNotWhileItsToeCreeps) {
   // 100 samples over 0.5 s, the angle steady; the front at 29.1 mm but for a grain
-  // hopping 3.8 mm beyond it for 30 samples in the middle (as a quick repose heap
-  // measured) and two single-sample hops near the ends.
+  // hopping 3.8 or 10 mm beyond it for single samples (as a quick repose heap
+  // measured), one of them the window's last.
   std::vector<double> t, front, angle;
   for (int i = 0; i < 100; ++i) {
     t.push_back(1.0 + 0.005 * i);
-    front.push_back(i >= 30 && i < 60 ? 0.0329 : 0.0291);
+    front.push_back(0.0291);
     angle.push_back(24.0 + 1e-7 * i);
   }
-  front[2] = front[97] = 0.0329;
+  front[2] = front[40] = 0.0329;
+  front[99] = 0.0391;
   HeapStillness h = heap_stillness(t, front, angle, 1.0, 0.4);
   ASSERT_TRUE(h.judged) << h.why;
   EXPECT_EQ(h.since, 1.0);
   EXPECT_EQ(h.front_change_m, 0.0);
-  EXPECT_NEAR(h.front_excursion_m, 0.0038, 1e-12);
+  EXPECT_NEAR(h.front_excursion_m, 0.0100, 1e-12);
   EXPECT_NEAR(h.angle_change_deg, 99e-7, 1e-12);
 
   // A grain bouncing beyond the toe every few samples, about half of the time (as
@@ -254,11 +255,20 @@ TEST(ReposeProfile, AHeapIsStillThoughAGrainHopsAtItsToeButNotWhileItsToeCreeps)
   EXPECT_EQ(h.front_change_m, 0.0);
   EXPECT_NEAR(h.front_excursion_m, 0.0038, 1e-12);
 
-  // A toe creeping by 3 mm across the window moves its lower envelope by ~2 mm, hops or not.
+  // A toe creeping by 3 mm across the window moves its lower envelope by 2.5 mm (from
+  // the first sample of the first sixth to that of the last), hops or not.
   for (int i = 0; i < 100; ++i) front[i] = 0.0291 + 0.003 * i / 99.0 + (i % 5 < 2 ? 0.0038 : 0.0);
   h = heap_stillness(t, front, angle, 1.0, 0.4);
   ASSERT_TRUE(h.judged);
-  EXPECT_NEAR(h.front_change_m, 0.003 * 67.0 / 99.0, 1e-4);
+  EXPECT_NEAR(h.front_change_m, 0.003 * 83.0 / 99.0, 1e-4);
+  // Still for two thirds of the window, then creeping 3 mm: seen (1.5 mm of it, where
+  // the last sixth starts).
+  for (int i = 0; i < 100; ++i) front[i] = 0.0291 + (i < 67 ? 0.0 : 0.003 * (i - 67) / 32.0);
+  h = heap_stillness(t, front, angle, 1.0, 0.4);
+  EXPECT_NEAR(h.front_change_m, 0.003 * 16.0 / 32.0, 1e-4);
+  // A toe that retreats (a grain rolling back) moves it too.
+  for (int i = 0; i < 100; ++i) front[i] = i < 50 ? 0.0291 : 0.0275;
+  EXPECT_NEAR(heap_stillness(t, front, angle, 1.0, 0.4).front_change_m, 0.0016, 1e-12);
 
   // Only the window counts; too short a window, or one without a heap, is not judged.
   for (int i = 0; i < 100; ++i) front[i] = 0.0291 + 0.003 * i / 99.0;

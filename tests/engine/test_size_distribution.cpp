@@ -200,7 +200,7 @@ TEST(SieveCurve, CurvesThatCannotBeAGradingSayWhy) {
   EXPECT_EQ(problem({{kA, kB}, {0, 1}}), "");
   EXPECT_NE(problem({{kA}, {0}}).find("at least two sizes"), std::string::npos);
   EXPECT_NE(problem({{kA, kA, kB}, {0, 0.5, 1}}).find("point 2 (d = 0.001 m): sizes must increase"), std::string::npos);
-  EXPECT_NE(problem({{kA, 1.5e-3, kB}, {0, 0.6, 0.5}}).find("point 3 (d = 0.002 m): the fraction finer must not decrease"),
+  EXPECT_NE(problem({{kA, 1.5e-3, kB}, {0, 0.6, 0.5}}).find("point 3 (d = 0.002 m): the mass finer must not decrease"),
             std::string::npos);
   EXPECT_NE(problem({{kA, kB}, {0.1, 1}}).find("first size"), std::string::npos);
   EXPECT_NE(problem({{kA, kB}, {0, 0.9}}).find("last size"), std::string::npos);
@@ -210,6 +210,7 @@ TEST(SieveCurve, CurvesThatCannotBeAGradingSayWhy) {
             std::string::npos);
   EXPECT_NE(problem({{kA, kB}, {0, 1}}, 0.5e-3).find("within the curve"), std::string::npos);
   EXPECT_NE(problem({{kA, 1.5e-3, kB}, {0, 0, 1}}, kA, 1.4e-3).find("no mass"), std::string::npos);
+  EXPECT_NE(problem({{kA, kB}, {0, 1}}, 1.5e-3, 1.5e-3).find("min and max must differ"), std::string::npos);
   Material m;
   m.size_distribution = SizeDistribution::log_uniform_mass;
   m.grading_curve = {{kA, kB}, {0, 0.9}};

@@ -122,6 +122,15 @@ TEST(Grid, KeysDoNotChangeBetweenBuilds) {
   ASSERT_EQ(demcal::jobs::physics_version("triaxial"), 3) << "a new physics version changes the scene's keys: update this test on purpose";
   EXPECT_EQ(demcal::jobs::task_key("collision", json{{"b", "x"}, {"a", 1.0}}), "50c066ebd614bccdec7efb5d7d0f281a");
   EXPECT_EQ(demcal::jobs::task_key("triaxial", json{{"b", "x"}, {"a", 1.0}}), "28b49815f93f55aa5cb541c3054dd287");
+  // And the defaults a job leaves out resolve as they did (the stored seed-study and
+  // quickstart results are found under these keys).
+  const auto first_key = [](const char* example) {
+    return demcal::jobs::load_job_file(std::string(DEMCAL_EXAMPLES_DIR) + "/" + example).tasks.at(0).key;
+  };
+  EXPECT_EQ(first_key("quickstart.json"), "e128670c626396fb4bc1df738d8f9974");
+  EXPECT_EQ(first_key("seed-study/table-2-2.json"), "9e254c978946e43bbbdd6591ef9c0d34");
+  EXPECT_EQ(first_key("seed-study/repose.json"), "14c01a1b375fbf8944c48d90ccf66908");
+  EXPECT_EQ(first_key("collision.json"), "6271bcca4b5cfe0bbe279d242e3b4be0");
 }
 
 TEST(Grid, FidelitySelectsDefaultSteps) {

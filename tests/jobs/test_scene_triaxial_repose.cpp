@@ -237,6 +237,15 @@ TEST(TriaxialReposeScenes, AMeasuredGradingCurveRunsFromItsFirstSizeToItsLastOrI
   EXPECT_LT(demcal::jobs::material_from(two.tasks[1].params).grading().mean(),
             demcal::jobs::material_from(two.tasks[0].params).grading().mean());
 
+  // Sieves listed at 0% below the finest grain, or at 100% above the coarsest, do not
+  // widen the range: the smallest grain sets the time step.
+  j = triaxial_base();
+  j["material"]["diameter"] = {{"grading", {{"d", {0.000075, 0.00015, 0.0003, 0.0006, 0.001, 0.002, 0.004}},
+                                            {"percent_finer", {0, 0, 0, 0, 50, 100, 100}}}}};
+  const Job flat = parse(j);
+  EXPECT_EQ(flat.tasks[0].params["d_min"].get<double>(), 0.0006);
+  EXPECT_EQ(flat.tasks[0].params["d_max"].get<double>(), 0.002);
+
   // A job without a curve keeps the engine's range (and its keys: Grid.* and the examples).
   const Job plain = parse(triaxial_base());
   EXPECT_EQ(plain.tasks[0].params["d_min"].get<double>(), 0.001);
@@ -265,7 +274,7 @@ TEST(TriaxialReposeScenes, AGradingCurveThatIsNotOneSaysWhereAndWhy) {
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"][3] = 1.4; }),
                "material.diameter.grading.d[3]", "(0, 1] m");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][2] = 0.25; }),
-               "material.diameter.grading", "point 3 (d = 0.00118 m): the fraction finer must not decrease");
+               "material.diameter.grading", "point 3 (d = 0.00118 m): the mass finer must not decrease");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][6] = 120; }),
                "material.diameter.grading.percent_finer[6]", "[0, 100] percent");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"].erase(6); }),
@@ -280,6 +289,26 @@ TEST(TriaxialReposeScenes, AGradingCurveThatIsNotOneSaysWhereAndWhy) {
                "material.diameter.grading", "within the curve's sizes");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"] = std::vector<double>(1001, 1e-3); }),
                "material.diameter.grading.d", "more than the 1000");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"] = {{"d", json::array()}, {"percent_finer", json::array()}}; }),
+               "material.diameter.grading.d", "at least two points");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"] = {100}; j["material"]["diameter"]["grading"]["d"] = {0.001}; }),
+               "material.diameter.grading.d", "at least two points");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["min"] = 0.0015; j["material"]["diameter"]["max"] = 0.0015; }),
+               "material.diameter.grading", "min and max must differ");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["max"] = 0.0005; }), "material.diameter.max",
+               "must exceed the curve's largest size with nothing finer, 0.0006");
+  EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["min"] = 0.0025; }), "material.diameter.min",
+               "must be below the curve's smallest size with everything finer, 0.00236");
+  // A curve the grid varies is blamed where its value was written.
+  EXPECT_PRED3(starts, with([](json& j) {
+                 json bad = sand_curve();
+                 bad["percent_finer"][2] = 5;
+                 j["material"]["diameter"].erase("grading");
+                 j["grid"] = {{"grading", {sand_curve(), bad}}};
+               }),
+               "grid.grading[1]", "point 3 (d = 0.00118 m)");
+  EXPECT_PRED3(starts, with([](json& j) { j["grid"] = {{"size_distribution", {"log_uniform_mass", "uniform"}}}; }),
+               "grid.size_distribution[1]", "draws by number");
   EXPECT_PRED3(starts, with([](json& j) { j["grid"] = {{"grading", {sand_curve(), 3}}}; }), "grid.grading[1]",
                "expected {\"d\"");
 }
