@@ -25,7 +25,7 @@ bool parse_size_distribution(const std::string& name, SizeDistribution& out);
 // first size and 1 at the last).
 struct SieveCurve {
   std::vector<double> d, finer;
-  bool empty() const { return d.empty(); }
+  bool empty() const { return d.empty() && finer.empty(); }
   std::string problem() const;  // why the curve cannot be a grading, or ""
 };
 

@@ -20,7 +20,7 @@ std::vector<ParamSpec> material_params() {
       real_param("material", "theta_deg", "theta_deg", 0.0).at_least(0).below(90),
       real_param("material", "eta", "eta", d.rolling_eta).at_least(0),
       // Their defaults are set with the grading (resolve_diameters): a measured curve
-      // without them runs from its first size to its last.
+      // without them runs from its largest size at 0% finer to its smallest at 100%.
       real_param("material", "diameter.min", "d_min", nullptr).above(0).at_most(1.0),
       real_param("material", "diameter.max", "d_max", nullptr).above(0).at_most(1.0),
       // No fallback: a job that leaves the grading out keeps the task keys it had

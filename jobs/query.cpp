@@ -262,9 +262,6 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
     throw JobError("--where", w.key + " is a finite number in every task; got \"" + w.value + "\"");
 }
 
-}  // namespace
-
-namespace {
 // Lists and objects (a grading curve) equal element by element, numbers as --where
 // compares them: 0 and 0.0, 40 and 40.0 alike.
 bool same_structure(const nlohmann::json& a, const nlohmann::json& b, int depth = 0) {
