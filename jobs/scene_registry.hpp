@@ -26,6 +26,10 @@ struct SceneOutput {
   std::vector<engine::Series> series;
 };
 
+struct Work {
+  double steps = 0, grains = 0;
+};
+
 struct SceneDef {
   std::string name;  // also the job-file section holding its protocol
   std::vector<ParamSpec> params;  // material and scene section
@@ -41,6 +45,10 @@ struct SceneDef {
   // What a task's settings predict the run will warn about (empty: nothing), said by
   // validate and run before it starts.
   std::function<std::string(const nlohmann::json& params)> advice;
+  // The part of a task's work known before it runs (its steps and grains) and what it
+  // counts ("the shear"); null where a scene cannot say.
+  std::function<Work(const nlohmann::json& params)> work;
+  std::string work_of;
 };
 
 const SceneDef* find_scene(const std::string& name);

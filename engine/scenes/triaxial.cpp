@@ -74,6 +74,10 @@ StepForecast TriaxialConfig::step_forecast() const {
   return forecast_for(*this, contact_params(material));  // the target law, the stiffest one the run uses
 }
 
+double TriaxialConfig::shear_steps() const {
+  return std::ceil((axial_strain + shear_ramp_strain) / (strain_rate * step_forecast().dt));
+}
+
 namespace {
 // The inertial number of a shear at `rate` on grains of mean diameter d and density
 // rho under mean stress p (GDR MiDi 2004): quasi-static well below 1e-3.

@@ -114,6 +114,10 @@ struct TriaxialConfig {
 
   void validate() const;  // throws ConfigError naming the field
   StepForecast step_forecast() const;  // for job validation (timestep.hpp)
+  // Steps of the deviatoric stage: to axial_strain at strain_rate, the start-up ramp
+  // taking twice its strain's time. The preparation's steps depend on how the packing
+  // settles and are not forecast.
+  double shear_steps() const;
   // The inertial number strain_rate * d_mean * sqrt(rho / p0) at the start of shear,
   // from the settings (d_mean of the material's grading): what the run's
   // quasi-static check will meet at least, known before it runs.

@@ -8,6 +8,7 @@
 #include "engine/scenes/collision.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace demcal::jobs {
 namespace {
@@ -106,7 +107,15 @@ SceneDef scene_collision() {
   return SceneDef{kSection, collision_params(), resolve, run,
                   /*headline=*/{"dt_over_critical", "drift_per_million_steps", "max_relative_error", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
-                  /*advice=*/advice};
+                  /*advice=*/advice,
+                  /*work=*/
+                  [](const nlohmann::json& p) {
+                    const engine::CollisionConfig c = config_from(p);
+                    const double steps = c.duration > 0.0 ? std::ceil(c.duration / c.step_forecast().dt)
+                                                          : static_cast<double>(c.steps);
+                    return Work{steps, static_cast<double>(c.particles)};
+                  },
+                  /*work_of=*/"the run"};
 }
 
 }  // namespace demcal::jobs

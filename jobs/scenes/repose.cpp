@@ -195,7 +195,11 @@ SceneDef scene_repose() {
                   /*headline=*/{"repose_deg", "repose_fit_err_deg", "repose_upper_deg", "repose_lower_deg", "runout_ratio",
                                 "time_to_rest_s", "particles", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
-                  /*advice=*/nullptr};
+                  /*advice=*/nullptr,
+                  // How long a heap takes to come to rest, and how many grains its
+                  // column holds, are known only once it runs.
+                  /*work=*/nullptr,
+                  /*work_of=*/""};
 }
 
 }  // namespace demcal::jobs

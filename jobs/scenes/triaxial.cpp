@@ -236,7 +236,13 @@ SceneDef scene_triaxial() {
                   /*headline=*/{"phi_peak_deg", "phi_cv_deg", "phi_cv_se_deg", "porosity_interior_initial", "eps_v_final",
                                 "max_inertial_number", "particles", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
-                  /*advice=*/advice};
+                  /*advice=*/advice,
+                  /*work=*/
+                  [](const nlohmann::json& p) {
+                    const engine::TriaxialConfig c = config_from(p);
+                    return Work{c.shear_steps(), static_cast<double>(c.particles)};
+                  },
+                  /*work_of=*/"the shear"};
 }
 
 }  // namespace demcal::jobs

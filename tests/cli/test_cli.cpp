@@ -33,6 +33,12 @@ TEST(Cli, ValidatePrintsCountAndFirstTask) {
   EXPECT_NE(r.out.find("4 task(s)"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("\"dt_factor\": 0.05"), std::string::npos) << r.out;
   EXPECT_TRUE(fs::is_empty(d.path / "out.stderr"));
+  // What the job will cost: 500 grains x 20,000 steps a task (the example's), 4 tasks.
+  EXPECT_NE(r.out.find("work: the run is 1e+07 grain-steps a task, 4e+07 in all"), std::string::npos) << r.out;
+  // A triaxial job: the shear's steps are forecast, the preparation's are not.
+  const Result t = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"}, d.path.string());
+  EXPECT_NE(t.out.find("work: the shear is "), std::string::npos) << t.out;
+  EXPECT_NE(t.out.find("the preparation adds"), std::string::npos) << t.out;
 }
 
 TEST(Cli, ValidateRejectsBadJobsNamingTheField) {

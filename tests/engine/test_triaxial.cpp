@@ -623,6 +623,12 @@ TEST(TriaxialScene, SnapshotsAtPreparationEveryFivePercentAndTheEnd) {
   EXPECT_EQ(rec.grains, 200u);
   EXPECT_TRUE(std::is_sorted(rec.times.begin(), rec.times.end()));
   EXPECT_LT(rec.times.front(), rec.times.back());
+  // The shear's steps, as `demcal validate` forecasts them before the run (the run
+  // ends on the walls' measured strain, within a check interval of the forecast).
+  ASSERT_FALSE(r.stages.empty());
+  EXPECT_EQ(r.stages.back().name, "shear");
+  const double forecast = short_loose(0.12, 0.01).shear_steps();
+  EXPECT_NEAR(static_cast<double>(r.stages.back().steps) / forecast, 1.0, 2e-3) << forecast;
 }
 
 TEST(TriaxialScene, TheSampleIsDrawnFromTheMaterialsGrading) {
