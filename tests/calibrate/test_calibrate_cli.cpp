@@ -735,5 +735,28 @@ TEST(CalibrateRefine, ARefinementRunsOnlyTheValueAPinnedAxisWasFittedAt) {
   for (const auto& t : sub) EXPECT_EQ(nlohmann::json::parse(t.params_json)["dt_factor"].get<double>(), 0.1);
 }
 
+TEST(CalibrateRefine, ARefinementPinsAGradingCurveAxisWrittenWithIntegers) {
+  // --where gives the curve as a user types it (spaces, 10.0 for 10); the stored grid
+  // holds it as the job file wrote it, the task parameters as reals: both must match.
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  const nlohmann::json fine = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 40, 100}}};
+  const nlohmann::json coarse = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 10, 100}}};
+  nlohmann::json spec = small_collision_job("curves", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"grading", {fine, coarse}}});
+  spec["material"].erase("diameter");
+  jobs::RunOptions ro;
+  ro.workers = 2;
+  ro.out_dir = d.file("out");
+  std::ostringstream log;
+  ro.log = &log;
+  ASSERT_EQ(jobs::run_job(s, jobs::parse_job(spec.dump(), "test"), ro).done, 8);
+  const auto runner = calibrate::dem_point_runner(d.file("out"), 2, &log, {jobs::parse_where(R"(grading={"d": [0.0006, 0.001, 0.002], "percent_finer": [0, 10.0, 100]})")});
+  runner(s, "curves", 1, {{15, 0.15}, {17.5, 0.175}});
+  const auto sub = s.tasks(calibrate::refine_job_name("curves", 1));
+  ASSERT_EQ(sub.size(), 4u);  // 2 theta x 2 eta, one curve
+  for (const auto& t : sub)
+    EXPECT_EQ(nlohmann::json::parse(t.params_json)["grading"]["percent_finer"][1].get<double>(), 10.0) << t.params_json;
+}
+
 }  // namespace
 }  // namespace demcal::test
