@@ -5,6 +5,7 @@
 #include "physics_version.hpp"
 #include "stop_signal.hpp"
 #include "progress.hpp"
+#include "work_forecast.hpp"
 #include "worker.hpp"
 
 #include <algorithm>
@@ -118,7 +119,16 @@ void Runner::prepare() {
   } else {
     threads_ = 1;
   }
-  if (!queue_.empty()) *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
+  if (queue_.empty()) return;
+  *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
+  if (const SceneDef* scene = find_scene(job_.scene)) {
+    std::vector<nlohmann::json> params;
+    for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json, nullptr, false));
+    const bool readable = std::none_of(params.begin(), params.end(), [](const auto& p) { return p.is_discarded(); });
+    const WorkForecast w = readable ? forecast_work(*scene, params) : WorkForecast{};
+    if (w.known)
+      *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, job_.scene, parallel) << "\n";
+  }
 }
 
 bool Runner::superseded() {

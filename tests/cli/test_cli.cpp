@@ -57,6 +57,18 @@ TEST(Cli, ValidateRejectsBadJobsNamingTheField) {
   EXPECT_NE(r.err.find("missing.json"), std::string::npos) << r.err;
 }
 
+TEST(Cli, RunForecastsTheWorkOfTheTasksItWillRun) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("work", {0.05, 0.1}));  // 30 grains x 400 steps a task
+  Result r = run_demcal({"run", "j.json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("work of the 2 task(s) to run: the run is 1.2e+04 grain-steps a task, 2.4e+04 in all"),
+            std::string::npos) << r.err;
+  r = run_demcal({"run", "j.json"}, d.path.string());  // all reused: nothing to forecast
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(r.err.find("work of"), std::string::npos) << r.err;
+}
+
 TEST(Cli, InvalidJobWritesNothing) {
   TempDir d;
   write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "material": {"theta_deg": 90}})");
