@@ -33,12 +33,13 @@ std::string quote(const std::string& text) {
 
 // The shards' log pattern for an #SBATCH --output line. sbatch reads a directive's
 // argument up to a blank unless it is quoted, takes backslash escapes, ends it at an
-// unquoted '#', and expands '%' patterns; so the folder is double-quoted with quotes and
-// backslashes escaped and '%' doubled, and a project folder like "My Runs" works.
+// unquoted '#', and expands '%' patterns; so the folder is double-quoted with quotes
+// escaped and '%' doubled, and a project folder like "My Runs" works. (A backslash
+// is refused before: in a filename pattern it turns every expansion off.)
 std::string sbatch_output_line(const fs::path& parts) {
   std::string q = "\"";
   for (char c : parts.string()) {
-    if (c == '"' || c == '\\') q += '\\';
+    if (c == '"') q += '\\';
     if (c == '%') q += '%';
     q += c;
   }
@@ -152,6 +153,12 @@ int slurm(SlurmArgs a) {
   const fs::path parts = parts_folder(a);
   if (fs::exists(parts) && !fs::is_directory(parts))
     throw jobs::JobError(a.parts.empty() ? "--db" : "--parts", parts.string() + " exists and is not a folder (the shards' databases go there)");
+  // SLURM reads a backslash anywhere in --output as "expand nothing and drop the
+  // backslashes": the log would land elsewhere, every shard in one file.
+  if (parts.string().find('\\') != std::string::npos)
+    throw jobs::JobError(a.parts.empty() ? "--db" : "--parts",
+                         "the parts folder " + parts.string() +
+                             " has a backslash in its path, which SLURM's --output patterns cannot carry; choose another");
   if (!a.demcal.empty() && !fs::exists(a.demcal))
     throw jobs::JobError("--demcal", "no such file: " + fs::absolute(a.demcal).string());
   if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))

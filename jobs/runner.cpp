@@ -121,13 +121,17 @@ void Runner::prepare() {
   }
   if (queue_.empty()) return;
   *opt_.log << "HDF5 files of this run: " << dir_.string() << "/\n";
-  if (const SceneDef* scene = find_scene(job_.scene)) {
-    std::vector<nlohmann::json> params;
-    for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json, nullptr, false));
-    const bool readable = std::none_of(params.begin(), params.end(), [](const auto& p) { return p.is_discarded(); });
-    const WorkForecast w = readable ? forecast_work(*scene, params) : WorkForecast{};
-    if (w.known)
-      *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, job_.scene, parallel) << "\n";
+  // A forecast only: a stored task it cannot read (a damaged or hand-edited database)
+  // is left for its worker to fail and name.
+  try {
+    if (const SceneDef* scene = find_scene(job_.scene)) {
+      std::vector<nlohmann::json> params;
+      for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
+      const WorkForecast w = forecast_work(*scene, params);
+      if (w.known)
+        *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, job_.scene, parallel) << "\n";
+    }
+  } catch (const std::exception&) {
   }
 }
 

@@ -7,17 +7,6 @@
 
 namespace demcal::jobs {
 
-// Whole triaxial runs on one thread of the 2-core machine docs/performance.md
-// describes (2026-11-27, physics version 3; wall time over steps and grains): 62 ns
-// per grain-step at 500 grains, 73 at 2,000, 99 at 10,000 (larger samples leave the
-// caches). A yardstick, not a promise for another machine.
-double ns_per_grain_step(double grains) {
-  const double x[] = {std::log10(500.0), std::log10(2000.0), std::log10(10000.0)}, y[] = {62.0, 73.0, 99.0};
-  const double g = std::clamp(std::log10(std::max(grains, 1.0)), x[0], x[2]);
-  const int k = g <= x[1] ? 0 : 1;
-  return y[k] + (y[k + 1] - y[k]) * (g - x[k]) / (x[k + 1] - x[k]);
-}
-
 WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params) {
   WorkForecast f;
   if (!scene.work || task_params.empty()) return f;
@@ -28,7 +17,7 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
     const Work w = scene.work(p);
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
-    f.core_seconds += gs * ns_per_grain_step(w.grains) * 1e-9;
+    f.core_seconds += gs * w.ns_per_grain_step * 1e-9;
   }
   return f;
 }
@@ -39,19 +28,26 @@ std::string sig2(double v) {
   os << std::setprecision(2) << v;
   return os.str();
 }
-std::string minutes(double seconds) {
-  return seconds < 60.0 ? "1 minute or less" : sig2(seconds / 60.0) + " minutes";
+// 0.5 minutes, 12 minutes, 3.4 hours: fixed point, never an exponent.
+std::string duration(double seconds) {
+  std::ostringstream os;
+  const double minutes = seconds / 60.0, hours = minutes / 60.0;
+  if (minutes < 10.0) os << std::fixed << std::setprecision(1) << minutes << " minutes";
+  else if (minutes < 120.0) os << std::fixed << std::setprecision(0) << minutes << " minutes";
+  else os << std::fixed << std::setprecision(hours < 10.0 ? 1 : 0) << hours << " hours";
+  return os.str();
 }
+std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }
 }  // namespace
 
 std::string describe(const WorkForecast& w, const std::string& scene, int workers) {
   std::string s = w.of + " is " + sig2(w.lo) + (w.hi > w.lo * 1.005 ? " to " + sig2(w.hi) : std::string()) +
-                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: about " +
-                  (w.core_seconds < 60.0 ? std::string("1 core-minute or less")
-                                         : sig2(w.core_seconds / 60.0) + " core-minutes");
-  if (workers > 1) s += " (" + minutes(w.core_seconds / workers) + " on " + std::to_string(workers) + " workers)";
-  s += " at the speed docs/performance.md measures for one core of this project's machine";
-  if (scene == "triaxial") s += "; the preparation adds 5-15%";
+                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds) +
+                  " of one core (" +
+                  (workers > 0 ? approx(w.core_seconds / workers) + " on " + std::to_string(workers) + " worker(s)"
+                               : std::string("divide by --workers")) +
+                  ") at the speed docs/performance.md measures on this project's machine";
+  if (scene == "triaxial") s += "; the preparation adds about 3-15% at the default strain";
   return s;
 }
 

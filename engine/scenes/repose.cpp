@@ -595,7 +595,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
           res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
           note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
                << still.angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
-               << still.front_change_m << " m (its lowest in each sixth of the window; tolerance one bin, "
+               << still.front_change_m << " m (the spread of its lowest value in each sixth of the window; tolerance one bin, "
                << bin << " m)";
           if (still.front_excursion_m > still.front_change_m + 1e-12)
             note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";

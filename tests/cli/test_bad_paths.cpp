@@ -220,6 +220,23 @@ TEST(BadPaths, ParametersNestedDeepInAnEditedDatabaseDoNotCrashTheReaders) {
   EXPECT_LE(r.rc, 2) << r.err;
 }
 
+TEST(BadPaths, AnEditedTaskTheWorkForecastCannotReadFailsOnlyItself) {
+  // The forecast `run` logs reads every pending task's stored parameters; one that an
+  // edit broke must fail as a task (named), not end the run before anything runs.
+  TempDir d;
+  write(d.file("j.json"), collision_job("edited", {0.05, 0.1, 0.2}));
+  ASSERT_EQ(run_demcal({"run", "j.json", "--db", "e.db"}, d.path.string()).rc, 0);
+  sql(d.file("e.db"), "UPDATE tasks SET status = 'pending'");
+  sql(d.file("e.db"), "UPDATE tasks SET params_json = '{\"seed\": 1}' WHERE id = 2");
+  const Result r = run_demcal({"run", "j.json", "--db", "e.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("task 2"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("work of the"), std::string::npos) << r.err;
+  int done = 0;
+  for (const auto& t : tasks_of(d.file("e.db"), "edited")) done += t.status == "done";
+  EXPECT_EQ(done, 2);
+}
+
 TEST(BadPaths, AStudyWhoseTableCannotBeWrittenSaysSoInsteadOfWrote) {
   TempDir d;
   fs::create_directories(d.path / "so" / "timestep.csv");  // a folder where the table goes

@@ -34,7 +34,7 @@ TEST(Cli, ValidatePrintsCountAndFirstTask) {
   EXPECT_NE(r.out.find("\"dt_factor\": 0.05"), std::string::npos) << r.out;
   EXPECT_TRUE(fs::is_empty(d.path / "out.stderr"));
   // What the job will cost: 500 grains x 20,000 steps a task (the example's), 4 tasks.
-  EXPECT_NE(r.out.find("work: the run is 1e+07 grain-steps a task, 4e+07 in all"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("work: the collision run is 1e+07 grain-steps a task, 4e+07 in all: under a minute of one core (divide by --workers)"), std::string::npos) << r.out;
   // A triaxial job: the shear's steps are forecast, the preparation's are not.
   const Result t = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"}, d.path.string());
   EXPECT_NE(t.out.find("work: the shear is "), std::string::npos) << t.out;
@@ -62,7 +62,7 @@ TEST(Cli, RunForecastsTheWorkOfTheTasksItWillRun) {
   write(d.file("j.json"), collision_job("work", {0.05, 0.1}));  // 30 grains x 400 steps a task
   Result r = run_demcal({"run", "j.json"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.err.find("work of the 2 task(s) to run: the run is 1.2e+04 grain-steps a task, 2.4e+04 in all"),
+  EXPECT_NE(r.err.find("work of the 2 task(s) to run: the collision run is 1.2e+04 grain-steps a task, 2.4e+04 in all"),
             std::string::npos) << r.err;
   r = run_demcal({"run", "j.json"}, d.path.string());  // all reused: nothing to forecast
   ASSERT_EQ(r.rc, 0) << r.err;

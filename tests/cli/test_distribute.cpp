@@ -234,6 +234,12 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
   r = run_bash("bash odd.sh shard", d.path.string(), {{"SLURM_ARRAY_TASK_ID", "2"}});
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_TRUE(fs::exists(d.path / odd / "parts" / "part-2.db"));
+  // A backslash turns SLURM's --output patterns off and is dropped: refused.
+  fs::create_directories(d.path / "a\\b");
+  r = run_demcal({"slurm", "j.json", "--array", "3", "--db", "a\\b/x.db", "--out", "bs.sh"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("has a backslash in its path"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("bs.sh")));
   // A relative --demcal is written absolute: the script runs it from the database's folder.
   fs::create_directories(d.path / "sub");
   fs::copy_file(DEMCAL_BIN, d.file("sub/demcal"));
