@@ -716,18 +716,23 @@ TEST(CalibrateRefine, DemRunnerAppendsASubJobThroughTheJobsRunner) {
   EXPECT_EQ(calibrate::base_jobs(s), std::vector<std::string>{"col"});
 }
 
+// Runs a job spec into the store on two workers; the number of tasks done.
+int run_spec(db::Store& s, const nlohmann::json& spec, const std::string& out, std::ostringstream& log) {
+  jobs::RunOptions ro;
+  ro.workers = 2;
+  ro.out_dir = out;
+  ro.log = &log;
+  return jobs::run_job(s, jobs::parse_job(spec.dump(), "test"), ro).done;
+}
+
 TEST(CalibrateRefine, ARefinementRunsOnlyTheValueAPinnedAxisWasFittedAt) {
   // The fit read dt_factor = 0.1 only (--where): its refinement runs that value only,
   // not every value of the axis (which would double its cost here).
   TempDir d;
   db::Store s(d.file("demcal.db"));
   const nlohmann::json spec = small_collision_job("pin", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"dt_factor", {0.1, 0.2}}});
-  jobs::RunOptions ro;
-  ro.workers = 2;
-  ro.out_dir = d.file("out");
   std::ostringstream log;
-  ro.log = &log;
-  ASSERT_EQ(jobs::run_job(s, jobs::parse_job(spec.dump(), "test"), ro).done, 8);
+  ASSERT_EQ(run_spec(s, spec, d.file("out"), log), 8);
   const auto runner = calibrate::dem_point_runner(d.file("out"), 2, &log, {jobs::parse_where("dt_factor=0.1")});
   runner(s, "pin", 1, {{15, 0.15}, {17.5, 0.175}});
   const auto sub = s.tasks(calibrate::refine_job_name("pin", 1));
@@ -744,12 +749,8 @@ TEST(CalibrateRefine, ARefinementPinsAGradingCurveAxisWrittenWithIntegers) {
   const nlohmann::json coarse = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 10, 100}}};
   nlohmann::json spec = small_collision_job("curves", {{"theta_deg", {10, 20}}, {"eta", {0.1, 0.2}}, {"grading", {fine, coarse}}});
   spec["material"].erase("diameter");
-  jobs::RunOptions ro;
-  ro.workers = 2;
-  ro.out_dir = d.file("out");
   std::ostringstream log;
-  ro.log = &log;
-  ASSERT_EQ(jobs::run_job(s, jobs::parse_job(spec.dump(), "test"), ro).done, 8);
+  ASSERT_EQ(run_spec(s, spec, d.file("out"), log), 8);
   const auto runner = calibrate::dem_point_runner(d.file("out"), 2, &log, {jobs::parse_where(R"(grading={"d": [0.0006, 0.001, 0.002], "percent_finer": [0, 10.0, 100]})")});
   runner(s, "curves", 1, {{15, 0.15}, {17.5, 0.175}});
   const auto sub = s.tasks(calibrate::refine_job_name("curves", 1));
