@@ -16,7 +16,7 @@ void print_work(const jobs::Job& job) {
   std::vector<nlohmann::json> params;
   for (const auto& t : job.tasks) params.push_back(t.params);
   const jobs::WorkForecast w = jobs::forecast_work(*scene, params);
-  if (w.known) std::cout << "work: " << jobs::describe(w, job.scene) << "\n";
+  if (w.known) std::cout << "work: " << jobs::describe(w) << "\n";
 }
 
 }  // namespace

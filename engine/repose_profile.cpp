@@ -222,8 +222,8 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
     a_lo = std::min(a_lo, angle_deg[i]), a_hi = std::max(a_hi, angle_deg[i]);
     fronts.push_back(front_x[i]);
   }
-  if (fronts.size() < 3) {
-    h.why = "its window holds fewer than three samples";
+  if (fronts.size() < 2) {
+    h.why = "its window holds fewer than two samples";
     return h;
   }
   h.judged = true;

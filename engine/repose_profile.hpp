@@ -92,8 +92,8 @@ MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vec
 // How far a heap moved over the samples of a collapse from time `from` on, from the
 // front and fitted angle at each sample (time, front_x, angle_deg: one entry per
 // sample). Not judged (and `why` says so) when the window would start before
-// `earliest`, holds fewer than three samples, or a sample in it has no angle (no heap
-// to fit).
+// `earliest`, holds fewer than two samples (the least a job's window may span), or a
+// sample in it has no angle (no heap to fit).
 //
 // The front is judged by its lower envelope: its lowest value in each sixth of the
 // window, and how far those six values spread. A grain hopping at the toe, within the

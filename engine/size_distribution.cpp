@@ -1,5 +1,6 @@
 #include "size_distribution.hpp"
 
+#include "enum_names.hpp"
 #include "packing.hpp"
 
 #include <algorithm>
@@ -18,12 +19,7 @@ const char* to_string(SizeDistribution s) {
 }
 
 bool parse_size_distribution(const std::string& name, SizeDistribution& out) {
-  for (SizeDistribution s : kSizeDistributions)
-    if (name == to_string(s)) {
-      out = s;
-      return true;
-    }
-  return false;
+  return parse_by_name(name, kSizeDistributions, out);
 }
 
 namespace {

@@ -129,7 +129,7 @@ void Runner::prepare() {
       for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
       const WorkForecast w = forecast_work(*scene, params);
       if (w.known)
-        *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, job_.scene, parallel) << "\n";
+        *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }
   } catch (const std::exception&) {
   }

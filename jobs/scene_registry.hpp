@@ -46,10 +46,10 @@ struct SceneDef {
   // What a task's settings predict the run will warn about (empty: nothing), said by
   // validate and run before it starts.
   std::function<std::string(const nlohmann::json& params)> advice;
-  // The part of a task's work known before it runs (its steps and grains) and what it
-  // counts ("the shear"); null where a scene cannot say.
+  // The part of a task's work known before it runs (its steps and grains), what it
+  // counts ("the shear") and what it leaves out; null where a scene cannot say.
   std::function<Work(const nlohmann::json& params)> work;
-  std::string work_of;
+  std::string work_of, work_left_out;
 };
 
 const SceneDef* find_scene(const std::string& name);

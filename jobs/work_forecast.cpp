@@ -12,6 +12,7 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
   if (!scene.work || task_params.empty()) return f;
   f.known = true;
   f.of = scene.work_of;
+  f.left_out = scene.work_left_out;
   f.lo = INFINITY;
   for (const auto& p : task_params) {
     const Work w = scene.work(p);
@@ -40,14 +41,14 @@ std::string duration(double seconds) {
 std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }
 }  // namespace
 
-std::string describe(const WorkForecast& w, const std::string& scene, int workers) {
+std::string describe(const WorkForecast& w, int workers) {
   std::string s = w.of + " is " + sig2(w.lo) + (w.hi > w.lo * 1.005 ? " to " + sig2(w.hi) : std::string()) +
                   " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds) +
                   " of one core (" +
                   (workers > 0 ? approx(w.core_seconds / workers) + " on " + std::to_string(workers) + " worker(s)"
                                : std::string("divide by --workers")) +
                   ") at the speed docs/performance.md measures on this project's machine";
-  if (scene == "triaxial") s += "; the preparation adds about 3-15% at the default strain";
+  if (!w.left_out.empty()) s += "; " + w.left_out;
   return s;
 }
 

@@ -13,6 +13,7 @@ namespace demcal::jobs {
 struct WorkForecast {
   bool known = false;      // false: the scene cannot count its work beforehand (repose)
   std::string of;          // what is counted ("the shear")
+  std::string left_out;    // what is not ("the preparation adds ...")
   double lo = 0, hi = 0;   // grain-steps of the cheapest and dearest task
   double grain_steps = 0;  // all tasks
   double core_seconds = 0;
@@ -22,6 +23,6 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
 
 // "the shear is 2.5e+08 grain-steps a task, 4.4e+09 in all: about 4.6 core-minutes
 // (divide by --workers) at ..."; `workers` > 0 gives the wall time on that many instead.
-std::string describe(const WorkForecast& w, const std::string& scene, int workers = 0);
+std::string describe(const WorkForecast& w, int workers = 0);
 
 }  // namespace demcal::jobs

@@ -1,5 +1,6 @@
 #include "repose.hpp"
 
+#include "../enum_names.hpp"
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
@@ -122,14 +123,7 @@ const char* to_string(SideWalls s) {
   }
 }
 
-bool parse_side_walls(const std::string& name, SideWalls& s) {
-  for (SideWalls c : kSideWalls)
-    if (name == to_string(c)) {
-      s = c;
-      return true;
-    }
-  return false;
-}
+bool parse_side_walls(const std::string& name, SideWalls& s) { return parse_by_name(name, kSideWalls, s); }
 
 StepForecast ReposeConfig::step_forecast() const {
   Material scaled = material;

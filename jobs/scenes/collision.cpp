@@ -114,10 +114,11 @@ SceneDef scene_collision() {
                     const double steps = c.duration > 0.0 ? std::ceil(c.duration / c.step_forecast().dt)
                                                           : static_cast<double>(c.steps);
                     // A dilute elastic gas, few contacts a grain: examples/collision.json ran at
-                    // 45-54 million grain-steps a second on one core (docs/performance.md).
+                    // 37-59 million grain-steps a second on one core (docs/performance.md).
                     return Work{steps, static_cast<double>(c.particles), 20.0};
                   },
-                  /*work_of=*/"the collision run"};
+                  /*work_of=*/"the collision run",
+                  /*work_left_out=*/""};
 }
 
 }  // namespace demcal::jobs

@@ -199,7 +199,8 @@ SceneDef scene_repose() {
                   // How long a heap takes to come to rest, and how many grains its
                   // column holds, are known only once it runs.
                   /*work=*/nullptr,
-                  /*work_of=*/""};
+                  /*work_of=*/"",
+                  /*work_left_out=*/""};
 }
 
 }  // namespace demcal::jobs

@@ -275,7 +275,7 @@ TEST(ReposeProfile, AHeapIsStillThoughAGrainHopsAtItsToeButNotWhileItsToeCreeps)
   h = heap_stillness(t, front, angle, 1.479, 0.4);  // the last four samples
   ASSERT_TRUE(h.judged) << h.why;
   EXPECT_LT(h.front_change_m, 0.0003);
-  EXPECT_EQ(heap_stillness(t, front, angle, 1.492, 0.4).why, "its window holds fewer than three samples");
+  EXPECT_EQ(heap_stillness(t, front, angle, 1.492, 0.4).why, "its window holds fewer than two samples");
   EXPECT_EQ(heap_stillness(t, front, angle, 0.3, 0.4).why, "its window starts before min_collapse_time");
   angle[50] = NAN;
   EXPECT_NE(heap_stillness(t, front, angle, 1.0, 0.4).why.find("no slope could be fitted"), std::string::npos);
