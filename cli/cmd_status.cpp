@@ -2,6 +2,7 @@
 
 #include "db/store.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/work_forecast.hpp"
 
 #include <iomanip>
 #include <iostream>
@@ -76,10 +77,22 @@ void print_missing(db::Store& store, const db::StatusCounts& counts) {
   }
 }
 
+// How long the unfinished tasks of each job will take, at the speed the database's
+// done tasks of the scene ran at (or the project's yardstick without any).
+void print_time_left(db::Store& store, const db::StatusCounts& counts) {
+  const double now = db::unix_now();
+  for (const auto& [name, by] : counts) {
+    const auto pending = by.find("pending"), running = by.find("running");
+    if ((pending == by.end() || pending->second == 0) && (running == by.end() || running->second == 0)) continue;
+    const jobs::TimeLeft t = jobs::time_left(store, name, now);
+    if (t.known) std::cout << name << ": " << jobs::describe(t) << "\n";
+  }
+}
+
 }  // namespace
 
 void add_status(CLI::App& app, int& exit_code) {
-  auto* cmd = app.add_subcommand("status", "Task counts per status, per job, the reason of up to three failed tasks per job, and how many finished tasks carry warnings");
+  auto* cmd = app.add_subcommand("status", "Task counts per status, per job, the time the unfinished tasks will take, the reason of up to three failed tasks per job, and how many finished tasks carry warnings");
   auto db = std::make_shared<std::string>("demcal.db");
   auto job = std::make_shared<std::string>();
   cmd->add_option("--db", *db, "SQLite database")->check(kDbPath)->capture_default_str();
@@ -110,6 +123,7 @@ void add_status(CLI::App& app, int& exit_code) {
         }
         std::cout << std::setw(9) << total << "\n";
       }
+      print_time_left(store, counts);
       print_messages(store, counts, *db);
       print_missing(store, counts);
       return kOk;

@@ -1,5 +1,6 @@
 #include "common.hpp"
 
+#include "db/store.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/scene_registry.hpp"
 #include "jobs/work_forecast.hpp"
@@ -10,13 +11,23 @@
 namespace demcal::cli {
 namespace {
 
-void print_work(const jobs::Job& job) {
+// At the speed of the database's done tasks of the scene when --db names one.
+void print_work(const jobs::Job& job, const std::string& db) {
   const jobs::SceneDef* scene = jobs::find_scene(job.scene);
   if (!scene) return;
   std::vector<nlohmann::json> params;
   for (const auto& t : job.tasks) params.push_back(t.params);
-  const jobs::WorkForecast w = jobs::forecast_work(*scene, params);
-  if (w.known) std::cout << "work: " << jobs::describe(w) << "\n";
+  jobs::MeasuredSpeed speed;
+  if (!db.empty()) {
+    db::Store store(db, /*read_only=*/true);
+    speed = jobs::measure_speed(store, *scene);
+  }
+  const jobs::WorkForecast w = jobs::forecast_work(*scene, params, speed);
+  if (!w.known) return;
+  std::cout << "work: " << jobs::describe(w) << "\n";
+  if (!db.empty() && speed.tasks == 0)
+    std::cout << "work: " << db << " holds no done " << job.scene
+              << " task with its CPU time (cpu_s) to measure this machine's speed by\n";
 }
 
 }  // namespace
@@ -24,10 +35,14 @@ void print_work(const jobs::Job& job) {
 void add_validate(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("validate", "Check a job file; print its task count and first task's parameters");
   auto file = std::make_shared<std::string>();
+  auto db = std::make_shared<std::string>();
   cmd->add_option("JOB", *file, "job file (JSON)")->required()->check(kPlainPath);
-  cmd->callback([file, &exit_code] {
+  cmd->add_option("--db", *db, "forecast the work at the speed this database's done tasks of the scene ran at")
+      ->check(kDbPath);
+  cmd->callback([file, db, &exit_code] {
     exit_code = guarded(*file, [&] {
       const jobs::Job job = jobs::load_job_file(*file);
+      if (!db->empty()) require_db(*db);
       std::string axes;
       for (const auto& a : job.axes) axes += (axes.empty() ? "" : " x ") + a;
       std::cout << "job " << job.name << ": scene " << job.scene << ", fidelity " << job.fidelity << "\n"
@@ -35,7 +50,7 @@ void add_validate(CLI::App& app, int& exit_code) {
                 << (axes.empty() ? std::string() : " over " + axes) << ", " << job.replicas << " replica(s)\n"
                 << "first task (key " << job.tasks.front().key << "):\n"
                 << job.tasks.front().params.dump(2) << "\n";
-      print_work(job);
+      print_work(job, *db);
       print_notes(*file, job.notes);
       return kOk;
     });

@@ -35,7 +35,7 @@ struct MergeReport {
   std::vector<std::string> conflicts;  // one line each: which part, job, index, key, what differs
 };
 
-// wall_s, wall_s_* and particle_steps_per_s: what the scenes report about speed.
+// wall_s, wall_s_*, cpu_s and particle_steps_per_s: what the scenes report about speed.
 bool is_timing_metric(const std::string& name);
 
 // Throws DbError(bad_input) naming the file and the reason for a part that cannot

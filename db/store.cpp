@@ -297,6 +297,19 @@ std::vector<std::pair<std::string, double>> Store::metrics(std::int64_t task_id)
   return out;
 }
 
+std::vector<std::pair<std::string, double>> Store::latest_done_metric(const std::string& scene,
+                                                                     const std::string& metric, int limit) {
+  std::vector<std::pair<std::string, double>> out;
+  Statement s = conn_.prepare(
+      "SELECT t.params_json, m.value FROM tasks t JOIN metrics m ON m.task_id = t.id AND m.name = ? "
+      "WHERE t.scene = ? AND t.status = 'done' AND m.value IS NOT NULL ORDER BY t.finished_at DESC, t.id DESC LIMIT ?");
+  s.bind(1, metric);
+  s.bind(2, scene);
+  s.bind(3, static_cast<std::int64_t>(limit));
+  while (s.step()) out.emplace_back(s.text(0), s.real(1));
+  return out;
+}
+
 std::vector<std::pair<std::string, std::string>> Store::artifacts(std::int64_t task_id) {
   std::vector<std::pair<std::string, std::string>> out;
   Statement s = conn_.prepare("SELECT kind, path FROM artifacts WHERE task_id = ? ORDER BY rowid");

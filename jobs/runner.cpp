@@ -127,7 +127,7 @@ void Runner::prepare() {
     if (const SceneDef* scene = find_scene(job_.scene)) {
       std::vector<nlohmann::json> params;
       for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
-      const WorkForecast w = forecast_work(*scene, params);
+      const WorkForecast w = forecast_work(*scene, params, measure_speed(store_, *scene));
       if (w.known)
         *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }

@@ -7,18 +7,69 @@
 
 namespace demcal::jobs {
 
-WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params) {
+namespace {
+double yardstick_seconds(const Work& w) { return w.steps * w.grains * w.ns_per_grain_step * 1e-9; }
+}  // namespace
+
+MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<std::pair<nlohmann::json, double>>& cpu_s_of_done) {
+  MeasuredSpeed m;
+  if (!scene.work) return m;
+  std::vector<std::pair<double, double>> ratio_weight;  // CPU over yardstick, the yardstick
+  double total = 0;
+  for (const auto& [params, cpu_s] : cpu_s_of_done) {
+    double forecast = NAN;
+    try {
+      forecast = yardstick_seconds(scene.work(params));
+    } catch (const std::exception&) {
+      continue;  // parameters this build cannot read (an older or damaged row)
+    }
+    if (!(std::isfinite(cpu_s) && cpu_s > 0 && std::isfinite(forecast) && forecast > 0)) continue;
+    ratio_weight.emplace_back(cpu_s / forecast, forecast);
+    total += forecast;
+  }
+  if (ratio_weight.empty()) return m;
+  // The median weighted by work: a task slowed by a busy machine moves it little, and
+  // small tasks, whose set-up the forecast does not count, weigh as little as they cost.
+  std::sort(ratio_weight.begin(), ratio_weight.end());
+  double below = 0;
+  for (const auto& [ratio, weight] : ratio_weight) {
+    m.factor = ratio;
+    if ((below += weight) >= 0.5 * total) break;
+  }
+  m.tasks = static_cast<int>(ratio_weight.size());
+  return m;
+}
+
+MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene) {
+  if (!scene.work) return {};
+  constexpr int kLatest = 50;
+  std::vector<std::pair<nlohmann::json, double>> done;
+  for (const auto& [params_json, cpu_s] : store.latest_done_metric(scene.name, "cpu_s", kLatest)) {
+    try {
+      done.emplace_back(nlohmann::json::parse(params_json), cpu_s);
+    } catch (const std::exception&) {
+    }
+  }
+  return measure_speed(scene, done);
+}
+
+WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params,
+                           const MeasuredSpeed& speed) {
   WorkForecast f;
   if (!scene.work || task_params.empty()) return f;
   f.known = true;
+  f.scene = scene.name;
   f.of = scene.work_of;
-  f.left_out = scene.work_left_out;
+  f.measured_on = speed.tasks;
+  f.factor = speed.tasks > 0 ? speed.factor : 1.0;
+  // Measured CPU time holds the preparation as the done tasks had it.
+  if (speed.tasks == 0) f.left_out = scene.work_left_out;
   f.lo = INFINITY;
   for (const auto& p : task_params) {
     const Work w = scene.work(p);
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
-    f.core_seconds += gs * w.ns_per_grain_step * 1e-9;
+    f.core_seconds += yardstick_seconds(w) * f.factor;
   }
   return f;
 }
@@ -39,6 +90,14 @@ std::string duration(double seconds) {
   return os.str();
 }
 std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }
+std::string speed_source(const WorkForecast& w) {
+  if (w.measured_on == 0) return "the speed docs/performance.md measures on this project's machine";
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(2) << w.factor;
+  return "the speed of the last " + std::to_string(w.measured_on) + " done " + w.scene +
+         " task(s) in this database (their CPU time, preparation included: " + os.str() +
+         "x the yardstick of docs/performance.md)";
+}
 }  // namespace
 
 std::string describe(const WorkForecast& w, int workers) {
@@ -47,8 +106,50 @@ std::string describe(const WorkForecast& w, int workers) {
                   " of one core (" +
                   (workers > 0 ? approx(w.core_seconds / workers) + " on " + std::to_string(workers) + " worker(s)"
                                : std::string("divide by --workers")) +
-                  ") at the speed docs/performance.md measures on this project's machine";
+                  ") at " + speed_source(w);
   if (!w.left_out.empty()) s += "; " + w.left_out;
+  return s;
+}
+
+TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) {
+  TimeLeft t;
+  std::vector<db::TaskRow> rows;
+  for (auto& r : store.tasks(job))
+    if (r.status == "pending" || r.status == "running") rows.push_back(std::move(r));
+  if (rows.empty()) return t;
+  const SceneDef* scene = find_scene(rows.front().scene);
+  if (!scene || !scene->work) return t;
+  const MeasuredSpeed speed = measure_speed(store, *scene);
+  std::vector<nlohmann::json> all;
+  try {
+    for (const auto& r : rows) {
+      std::vector<nlohmann::json> one{nlohmann::json::parse(r.params_json)};
+      double left = forecast_work(*scene, one, speed).core_seconds;
+      // A running task has used its wall time so far (one thread's worth: a guess
+      // for a task that runs several).
+      if (r.status == "running") {
+        ++t.running;
+        if (std::isfinite(r.started_at)) left = std::max(0.0, left - (now_unix_s - r.started_at));
+      } else {
+        ++t.pending;
+      }
+      t.core_seconds += left;
+      all.push_back(std::move(one.front()));
+    }
+  } catch (const std::exception&) {
+    return TimeLeft{};  // a stored task this build cannot read: no estimate rather than a wrong one
+  }
+  t.forecast = forecast_work(*scene, all, speed);
+  t.known = true;
+  return t;
+}
+
+std::string describe(const TimeLeft& t) {
+  std::string s = std::to_string(t.pending + t.running) + " task(s) to go: " + approx(t.core_seconds) + " of one core";
+  if (t.running > 0)
+    s += ", " + approx(t.core_seconds / t.running) + " at the " + std::to_string(t.running) + " running now";
+  s += "; at " + speed_source(t.forecast);
+  if (!t.forecast.left_out.empty()) s += "; " + t.forecast.left_out;
   return s;
 }
 

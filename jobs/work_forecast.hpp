@@ -1,8 +1,11 @@
 #pragma once
 // What tasks will cost before they run: the grain-steps of the part of each task a
 // scene can count beforehand (a collision's run, a triaxial's shear), and the
-// core-seconds they take at the scene's speed measured on this project's machine.
+// core-seconds they take: at the speed the database's done tasks of the scene ran
+// at where it holds any, else at the scene's speed on this project's machine.
 #include "scene_registry.hpp"
+
+#include "db/store.hpp"
 
 #include <nlohmann/json.hpp>
 #include <string>
@@ -17,12 +20,42 @@ struct WorkForecast {
   double lo = 0, hi = 0;   // grain-steps of the cheapest and dearest task
   double grain_steps = 0;  // all tasks
   double core_seconds = 0;
+  int measured_on = 0;    // done tasks the speed was measured on (0: the project's yardstick)
+  double factor = 1;      // their CPU time over the yardstick's forecast of it
+  std::string scene;
 };
 
-WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params);
+// Done tasks' cost against the yardstick: the median over them, weighted by their
+// forecast work, of CPU seconds (metric cpu_s, all threads, preparation included)
+// over the forecast's core-seconds.
+struct MeasuredSpeed {
+  int tasks = 0;
+  double factor = 1;
+};
+// Tasks whose parameters this build cannot read are passed over.
+MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<std::pair<nlohmann::json, double>>& cpu_s_of_done);
+// The same over the last 50 done tasks of the scene in a database: the latest tell
+// what the machine does now.
+MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene);
+
+WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params,
+                           const MeasuredSpeed& speed = {});
 
 // "the shear is 2.5e+08 grain-steps a task, 4.4e+09 in all: about 4.6 core-minutes
 // (divide by --workers) at ..."; `workers` > 0 gives the wall time on that many instead.
 std::string describe(const WorkForecast& w, int workers = 0);
+
+// What is left of a job in a database: its pending tasks' forecast, and the part of
+// each running task's forecast its time since it started has not used.
+struct TimeLeft {
+  bool known = false;  // false: nothing left, or a scene that cannot count its work
+  int pending = 0, running = 0;
+  double core_seconds = 0;
+  WorkForecast forecast;  // of the pending and running tasks (speed and its source)
+};
+TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s);
+// "12 task(s) to go: about 14 minutes of one core, about 7.0 minutes at the 2
+// running now; at the speed of ..."
+std::string describe(const TimeLeft& t);
 
 }  // namespace demcal::jobs

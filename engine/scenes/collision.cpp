@@ -3,11 +3,11 @@
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
+#include "../run_clock.hpp"
 #include "../timestep.hpp"
 #include "../world.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 namespace demcal::engine {
@@ -67,6 +67,7 @@ Metrics CollisionResult::metrics() const {
           {"drift_per_million_steps", drift_per_million_steps},
           {"max_relative_error", max_relative_error},
           {"wall_s", wall_seconds},
+          {"cpu_s", cpu_seconds},
           {"particle_steps_per_s", particle_steps_per_second},
           {"simulated_s", simulated_seconds},
           {"drift_per_simulated_s", drift_per_simulated_second},
@@ -134,7 +135,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
     res.energy.add({static_cast<double>(world.step_count()), world.time(), e.kinetic(), e.elastic(), total}, obs);
   };
 
-  const auto t0 = std::chrono::steady_clock::now();
+  const RunClock clock;
   try {
     world.refresh();
     sample();
@@ -151,9 +152,10 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
     res.outcome.failed_stage = "collision";
     res.outcome.message = e.what();
   }
-  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double secs = clock.wall_seconds();
   res.steps_done = world.step_count();
   res.wall_seconds = secs;
+  res.cpu_seconds = clock.cpu_seconds();
   res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
   res.simulated_seconds = static_cast<double>(res.steps_done) * opt.dt;
   res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;

@@ -46,6 +46,7 @@ struct CollisionResult {
   double drift_per_million_steps = 0;  // relative, from a least-squares line through E(t)/E0
   double max_relative_error = 0;       // max |E - E0| / E0 over the samples
   double wall_seconds = 0;
+  double cpu_seconds = 0;  // all threads (RunClock)
   double particle_steps_per_second = 0;
   double simulated_seconds = 0;        // steps_done * dt
   double drift_per_simulated_second = 0;  // relative, from the same line: drift_per_million_steps / (1e6 dt)

@@ -4,12 +4,12 @@
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
+#include "../run_clock.hpp"
 #include "../timestep.hpp"
 #include "../world.hpp"
 
 #include <algorithm>
 #include <set>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
@@ -235,6 +235,7 @@ Metrics ReposeResult::metrics() const {
                {"bin_width_m", bin_width},
                {"steps", static_cast<double>(steps)},
                {"wall_s", wall_seconds},
+               {"cpu_s", cpu_seconds},
                {"threads", static_cast<double>(threads)}};
   if (outcome.ok()) {
     Metrics r = {{"repose_deg", repose_deg},
@@ -263,7 +264,7 @@ Metrics ReposeResult::metrics() const {
 
 ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   cfg.validate();
-  const auto t_start = std::chrono::steady_clock::now();
+  const RunClock clock;
   ReposeResult res;
   res.energy.name = "energy";
   res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x", "repose_deg"};
@@ -661,7 +662,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     if (!res.outcome.message.empty()) res.outcome.message += "; ";
     res.outcome.message += wmsg;
   }
-  res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  res.wall_seconds = clock.wall_seconds();
+  res.cpu_seconds = clock.cpu_seconds();
   if (obs) obs->on_progress(1.0);
   return res;
 }

@@ -150,6 +150,7 @@ struct ReposeResult {
   double bin_width = 0;
   long steps = 0;
   double wall_seconds = 0;
+  double cpu_seconds = 0;  // all threads (RunClock)
   int threads = 1;
   std::string boundaries;     // words: which walls, which are periodic
 

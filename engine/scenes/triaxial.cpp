@@ -3,6 +3,7 @@
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
+#include "../run_clock.hpp"
 #include "../series_stats.hpp"
 #include "../servo_wall.hpp"
 #include "../timestep.hpp"
@@ -10,7 +11,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cstdio>
 #include <cmath>
 #include <sstream>
@@ -154,6 +154,7 @@ Metrics TriaxialResult::metrics() const {
             {"particles", static_cast<double>(particles)},
             {"steps", static_cast<double>(steps)},
             {"wall_s", wall_seconds},
+            {"cpu_s", cpu_seconds},
             {"local_damping_used", local_damping_used ? 1.0 : 0.0},
             {"prep_damping", prep_damping},
             {"shear_damping", shear_damping},
@@ -448,7 +449,7 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
 
 TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   cfg.validate();
-  const auto t0 = std::chrono::steady_clock::now();
+  const RunClock clock;
   TriaxialResult res;
   res.packing = to_string(cfg.packing);
   res.threads = cfg.threads;
@@ -517,7 +518,8 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
 
   auto finish = [&]() {
     res.steps = world.step_count();
-    res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    res.wall_seconds = clock.wall_seconds();
+    res.cpu_seconds = clock.cpu_seconds();
   };
 
   try {

@@ -186,6 +186,7 @@ struct TriaxialResult {
   std::vector<StageReport> stages;
   long steps = 0;
   double wall_seconds = 0;
+  double cpu_seconds = 0;  // all threads (RunClock)
   int threads = 1;
 
   Series series;  // see the column list in triaxial.cpp

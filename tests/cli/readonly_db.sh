@@ -14,6 +14,14 @@ T=$(mktemp -d /tmp/demcal-readonly.XXXXXX)
 trap 'chmod -R u+w "$T"; rm -rf "$T"' EXIT
 chmod 755 "$T"
 cp "$DEMCAL" "$T/demcal"  # the build folder may not be open to nobody
+cmp -s "$DEMCAL" "$T/demcal" || { echo "FAIL: $DEMCAL changed while it was copied (rebuilt during ctest?)"; exit 1; }
+# A run of the owner's that must succeed; its output is shown when it does not.
+owner_run() {
+  "$T/demcal" run "$@" > "$T/owner.log" 2>&1 && return 0
+  echo "the owner's run failed: demcal run $*"
+  cat "$T/owner.log"
+  return 1
+}
 cat > "$T/j.json" << 'JOB'
 {"name": "ro", "scene": "collision", "material": {"kn": 3e7, "diameter": {"min": 0.001, "max": 0.002}},
  "collision": {"particles": 20, "steps": 200, "sample_every": 20}, "grid": {"dt_factor": [0.1, 0.2]},
@@ -27,8 +35,8 @@ cat > "$T/f.json" << 'JOB'
 JOB
 mkdir "$T/shut" "$T/open" "$T/outs"
 chmod 777 "$T/outs"  # where the refused runs would have put their HDF5 files
-"$T/demcal" run "$T/j.json" --db "$T/shut/x.db" --out "$T/out" > /dev/null 2>&1 || { echo "setup run failed"; exit 1; }
-"$T/demcal" run "$T/f.json" --db "$T/shut/x.db" --out "$T/out" > /dev/null 2>&1 || { echo "setup run failed"; exit 1; }
+owner_run "$T/j.json" --db "$T/shut/x.db" --out "$T/out" || exit 1
+owner_run "$T/f.json" --db "$T/shut/x.db" --out "$T/out" || exit 1
 cp "$T/shut/x.db" "$T/open/x.db"
 chmod 444 "$T/shut/x.db" "$T/open/x.db"
 chmod 555 "$T/shut"   # a folder nobody may write: SQLite cannot make its -shm file there
@@ -81,8 +89,7 @@ fi
 left=$(ls "$T/open")
 [[ "$left" == "x.db" ]] || { echo "FAIL: files left beside the read-only database: $left"; fail=1; }
 chmod 644 "$T/open/x.db"
-"$T/demcal" run "$T/j.json" --db "$T/open/x.db" --out "$T/out" > /dev/null 2>&1 ||
-  { echo "FAIL: the owner's run after the readers failed"; fail=1; }
+owner_run "$T/j.json" --db "$T/open/x.db" --out "$T/out" || { echo "FAIL: the owner's run after the readers failed"; fail=1; }
 # The job's output folder left by an earlier run of someone else's: refused before
 # any task runs, and nothing recorded.
 mkdir -p "$T/outs2/ro" "$T/mine"

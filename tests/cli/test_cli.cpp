@@ -2,6 +2,7 @@
 #include "dist_util.hpp"
 
 #include "jobs/hdf5_writer.hpp"
+#include "jobs/job_spec.hpp"
 #include "jobs/worker.hpp"
 #include "jobs/xdmf_writer.hpp"
 
@@ -67,6 +68,35 @@ TEST(Cli, RunForecastsTheWorkOfTheTasksItWillRun) {
   r = run_demcal({"run", "j.json"}, d.path.string());  // all reused: nothing to forecast
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_EQ(r.err.find("work of"), std::string::npos) << r.err;
+}
+
+TEST(Cli, ForecastsAtTheSpeedOfTheDatabasesDoneTasks) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("work", {0.05, 0.1}));
+  ASSERT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
+  // Another job of the scene, validated against what the first one's tasks cost.
+  write(d.file("k.json"), collision_job("more", {0.02, 0.03, 0.04}));
+  Result r = run_demcal({"validate", "k.json", "--db", "demcal.db"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("at the speed of the last 2 done collision task(s) in this database (their CPU time"),
+            std::string::npos) << r.out;
+  r = run_demcal({"validate", "k.json", "--db", "missing.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db: no database at missing.db"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("missing.db")));
+  // Its tasks recorded but not run: status says how long they will take.
+  const demcal::jobs::Job more = demcal::jobs::load_job_file(d.file("k.json"));
+  {
+    demcal::db::Store store(d.file("demcal.db"));
+    std::vector<demcal::db::NewTask> tasks;
+    for (const auto& t : more.tasks) tasks.push_back({t.key, more.scene, t.params.dump()});
+    store.put_job(more.name, more.spec.dump(), tasks);
+  }
+  r = run_demcal({"status"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("more: 3 task(s) to go: under a minute of one core; at the speed of the last 2 done collision"),
+            std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("work: "), std::string::npos) << "the finished job has nothing to go\n" << r.out;
 }
 
 TEST(Cli, InvalidJobWritesNothing) {

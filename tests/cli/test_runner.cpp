@@ -82,7 +82,10 @@ TEST(Runner, SigkillOfRunnerLosesNothingAndResumes) {
   for (const auto& t : killed)
     if (t.status == "running") {
       ++left_running;
-      if (t.pid > 0) kill(static_cast<pid_t>(t.pid), SIGKILL);  // its orphaned worker
+      // Its worker dies with the runner (PR_SET_PDEATHSIG). Wait for that rather than
+      // signal the pid: reaped, the number may already name another process.
+      for (int k = 0; k < 250 && t.pid > 0 && kill(static_cast<pid_t>(t.pid), 0) == 0; ++k)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
   EXPECT_LE(left_running, 1) << "one worker, at most one task running";
   std::this_thread::sleep_for(std::chrono::milliseconds(100));

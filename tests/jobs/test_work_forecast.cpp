@@ -1,0 +1,119 @@
+// The work forecast at a measured speed: done tasks' CPU time against the yardstick,
+// and what is left of a job in a database.
+#include "../temp_dir.hpp"
+#include "db/store.hpp"
+#include "jobs/job_spec.hpp"
+#include "jobs/work_forecast.hpp"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+using namespace demcal;
+
+namespace {
+
+// Four quick triaxial tasks, two sample sizes (their yardsticks differ).
+jobs::Job small_triaxial_job() {
+  return jobs::parse_job(R"({"name": "wf", "scene": "triaxial", "fidelity": "quick",
+                             "grid": {"particles": [300, 600], "eta": [0.0, 0.1]}})",
+                         "wf.json");
+}
+
+double yardstick(const jobs::SceneDef& scene, const nlohmann::json& params) {
+  return jobs::forecast_work(scene, {params}).core_seconds;
+}
+
+}  // namespace
+
+TEST(WorkForecast, MeasuredSpeedIsTheMedianOfCpuTimeOverTheYardstick) {
+  const jobs::Job job = small_triaxial_job();
+  const jobs::SceneDef& scene = *jobs::find_scene("triaxial");
+  ASSERT_EQ(job.tasks.size(), 4u);
+  // Tasks 0 and 2 have 300 grains, 1 and 3 have 600: twice the work. Three done tasks
+  // ran 1.5x, 2x and 10x (a busy machine) their yardstick.
+  ASSERT_EQ(job.tasks[0].params["particles"], 300);
+  ASSERT_EQ(job.tasks[1].params["particles"], 600);
+  std::vector<std::pair<nlohmann::json, double>> done;
+  const double ratios[] = {1.5, 2.0, 10.0};
+  for (int k = 0; k < 3; ++k) done.emplace_back(job.tasks[k].params, ratios[k] * yardstick(scene, job.tasks[k].params));
+  done.emplace_back(nlohmann::json{{"particles", "many"}}, 5.0);  // unreadable: passed over
+  done.emplace_back(job.tasks[3].params, 0.0);                    // no time: passed over
+  const jobs::MeasuredSpeed m = jobs::measure_speed(scene, done);
+  EXPECT_EQ(m.tasks, 3);
+  EXPECT_NEAR(m.factor, 2.0, 1e-12);
+  // Weighted by work: a 600-grain task at 3x outweighs a 300-grain one at 1x.
+  const double w300 = yardstick(scene, job.tasks[0].params), w600 = yardstick(scene, job.tasks[1].params);
+  ASSERT_GT(w600, 1.9 * w300);
+  EXPECT_NEAR(jobs::measure_speed(scene, {{job.tasks[0].params, w300}, {job.tasks[1].params, 3 * w600}}).factor, 3.0,
+              1e-12);
+
+  std::vector<nlohmann::json> params;
+  for (const auto& t : job.tasks) params.push_back(t.params);
+  const jobs::WorkForecast plain = jobs::forecast_work(scene, params);
+  const jobs::WorkForecast measured = jobs::forecast_work(scene, params, m);
+  EXPECT_NEAR(measured.core_seconds, 2.0 * plain.core_seconds, 1e-9 * plain.core_seconds);
+  EXPECT_EQ(measured.grain_steps, plain.grain_steps);
+  const std::string said = jobs::describe(measured);
+  EXPECT_NE(said.find("at the speed of the last 3 done triaxial task(s) in this database"), std::string::npos) << said;
+  EXPECT_NE(said.find("2.00x the yardstick"), std::string::npos) << said;
+  // The measured CPU time holds the preparation: the yardstick's caveat goes.
+  EXPECT_EQ(said.find("the preparation adds"), std::string::npos) << said;
+  EXPECT_NE(jobs::describe(plain).find("the preparation adds"), std::string::npos);
+  // No done task: the yardstick, unchanged.
+  EXPECT_EQ(jobs::measure_speed(scene, {}).tasks, 0);
+}
+
+TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
+  test::TempDir d;
+  const jobs::Job job = small_triaxial_job();
+  const jobs::SceneDef& scene = *jobs::find_scene("triaxial");
+  db::Store store(d.file("wf.db"));
+  std::vector<db::NewTask> tasks;
+  for (const auto& t : job.tasks) tasks.push_back({t.key, "triaxial", t.params.dump()});
+  store.put_job(job.name, job.spec.dump(), tasks);
+  const auto rows = store.tasks(job.name);
+  ASSERT_EQ(rows.size(), 4u);
+
+  // Nothing measured yet: the yardstick, all four pending.
+  jobs::TimeLeft t = jobs::time_left(store, job.name, db::unix_now());
+  ASSERT_TRUE(t.known);
+  EXPECT_EQ(t.pending, 4);
+  EXPECT_EQ(t.running, 0);
+  EXPECT_EQ(t.forecast.measured_on, 0);
+  double all = 0;
+  for (const auto& r : job.tasks) all += yardstick(scene, r.params);
+  EXPECT_NEAR(t.core_seconds, all, 1e-9 * all);
+
+  // Task 0 done at 3x its yardstick; task 1 running, started now and judged 1 s later.
+  ASSERT_TRUE(store.claim(rows[0].id, "w"));
+  db::Outcome out;
+  out.status = "done";
+  out.wall_s = 1;
+  out.metrics = {{"cpu_s", 3.0 * yardstick(scene, job.tasks[0].params)}};
+  ASSERT_TRUE(store.finish(rows[0].id, "w", out));
+  ASSERT_TRUE(store.claim(rows[1].id, "w"));
+  t = jobs::time_left(store, job.name, db::unix_now() + 1.0);
+  ASSERT_TRUE(t.known);
+  EXPECT_EQ(t.pending, 2);
+  EXPECT_EQ(t.running, 1);
+  EXPECT_EQ(t.forecast.measured_on, 1);
+  EXPECT_NEAR(t.forecast.factor, 3.0, 1e-9);
+  const double expected = 3.0 * (yardstick(scene, job.tasks[1].params) + yardstick(scene, job.tasks[2].params) +
+                                 yardstick(scene, job.tasks[3].params)) - 1.0;
+  EXPECT_NEAR(t.core_seconds, expected, 0.05) << "the running task's second since it started is used";
+  const std::string said = jobs::describe(t);
+  EXPECT_NE(said.find("3 task(s) to go: "), std::string::npos) << said;
+  EXPECT_NE(said.find(" at the 1 running now; at the speed of the last 1 done triaxial task(s)"), std::string::npos)
+      << said;
+
+  // Everything done: nothing to say.
+  for (std::size_t k = 1; k < rows.size(); ++k) {
+    if (k > 1) {
+      ASSERT_TRUE(store.claim(rows[k].id, "w"));
+    }
+    ASSERT_TRUE(store.finish(rows[k].id, "w", out));
+  }
+  EXPECT_FALSE(jobs::time_left(store, job.name, db::unix_now()).known);
+}
