@@ -3,6 +3,7 @@
 
 #include "db/schema.hpp"
 #include "db/store.hpp"
+#include "jobs/folder_lock.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/runner.hpp"
 #include "jobs/study.hpp"
@@ -116,6 +117,8 @@ int study(const StudyArgs& a) {
       continue;
     jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
   }
+  // Held until the study returns: its charts' data and scripts have fixed names.
+  const jobs::FolderLock lock(o.out_dir, flag);
   if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {

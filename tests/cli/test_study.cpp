@@ -3,6 +3,10 @@
 // with a clear message and exit code 2.
 #include "cli_util.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 using namespace demcal::test;
 
 TEST(CliStudy, TimestepQuickWritesChartsRecommendationAndStoresTasks) {
@@ -29,6 +33,28 @@ TEST(CliStudy, TimestepQuickWritesChartsRecommendationAndStoresTasks) {
   EXPECT_EQ(again.rc, 0) << again.err;
   EXPECT_NE(again.out.find("reused, 0 run now"), std::string::npos) << again.out;
   EXPECT_EQ(slurp(d.file("charts/timestep_recommendation.txt")), first_recommendation);
+}
+
+// Two studies into one folder would overwrite each other's chart data while gnuplot
+// reads it: the second is refused, naming the holder, before its database is made.
+TEST(CliStudy, ASecondStudyIntoAFolderInUseIsRefused) {
+  TempDir d;
+  fs::create_directories(d.path / "charts");
+  const int fd = ::open(d.file("charts/.demcal-lock").c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::write(fd, "4242\n", 5), 5);
+  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+  Result r = run_demcal({"study", "grazing", "--out", "charts"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: another demcal (pid 4242) is writing into charts: wait for it to finish, or give this "
+                       "one another folder"),
+            std::string::npos) << r.err;
+  r = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "charts"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_FALSE(fs::exists(d.file("s.db"))) << "refused before the database was made";
+  ::close(fd);  // released: the study runs
+  r = run_demcal({"study", "grazing", "--out", "charts"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
 }
 
 TEST(CliStudy, TimestepRecommendationFollowsItsRule) {
