@@ -21,6 +21,7 @@
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
+#include <unordered_map>
 #include <unistd.h>
 
 namespace demcal::jobs {
@@ -65,7 +66,12 @@ class Runner {
   std::string describe_task(std::size_t index, std::int64_t task_id) const;
   // Says, once per change, which other runners hold the tasks this run waits on.
   void say_holders(std::string& said);
-  double eta() ;
+  // Wall seconds left for this run's queued and running tasks: their forecast at the
+  // speed measured in the database (re-measured as tasks finish); without a forecast,
+  // the mean of the tasks this run finished.
+  double eta();
+  double forecast_eta() const;
+  void measure_speed_now();
 
   db::Store& store_;
   const Job& job_;
@@ -77,6 +83,9 @@ class Runner {
   std::vector<Running> running_;
   int workers_ = 1, threads_ = 1, ran_ = 0;
   double busy_s_ = 0;  // summed wall time of tasks this run finished
+  const SceneDef* scene_ = find_scene(job_.scene);
+  std::unordered_map<std::int64_t, double> yardstick_s_;  // task id -> its forecast core-seconds at factor 1
+  MeasuredSpeed speed_;
   Counts counts_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
   bool superseded_ = false;  // another run recorded another spec under this job's name
@@ -124,12 +133,15 @@ void Runner::prepare() {
   // A forecast only: a stored task it cannot read (a damaged or hand-edited database)
   // is left for its worker to fail and name.
   try {
-    if (const SceneDef* scene = find_scene(job_.scene)) {
+    if (scene_ && scene_->work) {
       std::vector<nlohmann::json> params;
-      for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
-      const WorkForecast w = forecast_work(*scene, params, measure_speed(store_, *scene));
-      if (w.known)
-        *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
+      for (const auto& t : queue_) {
+        params.push_back(nlohmann::json::parse(t.params_json));
+        yardstick_s_[t.id] = forecast_work(*scene_, {params.back()}).core_seconds;
+      }
+      speed_ = measure_speed(store_, *scene_);
+      *opt_.log << "work of the " << queue_.size() << " task(s) to run: "
+                << describe(forecast_work(*scene_, params, speed_), parallel) << "\n";
     }
   } catch (const std::exception&) {
   }
@@ -215,7 +227,39 @@ Counts Runner::counts() {
   return c;
 }
 
+double Runner::forecast_eta() const {
+  const double factor = speed_.tasks > 0 ? speed_.factor : 1.0;
+  const auto now = std::chrono::steady_clock::now();
+  std::vector<double> queued;
+  std::vector<std::pair<double, double>> running;
+  for (const auto& t : queue_) {
+    const auto it = yardstick_s_.find(t.id);
+    if (it == yardstick_s_.end()) return -1;  // a task queued since (re-queued): no forecast for it
+    queued.push_back(it->second * factor);
+  }
+  for (const auto& r : running_) {
+    const auto it = yardstick_s_.find(r.task_id);
+    if (it == yardstick_s_.end()) return -1;
+    running.emplace_back(it->second * factor, std::chrono::duration<double>(now - r.start).count());
+  }
+  const int left = static_cast<int>(queue_.size() + running_.size());
+  return cpu_seconds_left(queued, running, threads_) / (std::max(1, std::min(workers_, left)) * threads_);
+}
+
+// After a task finishes: its CPU time is in the database now.
+void Runner::measure_speed_now() {
+  if (yardstick_s_.empty()) return;
+  try {
+    speed_ = measure_speed(store_, *scene_);
+  } catch (const std::exception&) {  // a forecast only
+  }
+}
+
 double Runner::eta() {
+  if (!yardstick_s_.empty()) {
+    const double s = forecast_eta();
+    if (s >= 0) return s;
+  }
   if (ran_ == 0) return -1;
   const double per_task = busy_s_ / ran_;
   const int left = counts_.total - counts_.done - counts_.failed;
@@ -241,6 +285,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   store_.finish(r.task_id, token_, *out);
   ++ran_;
   busy_s_ += out->wall_s;
+  measure_speed_now();
   std::ostringstream msg;
   msg << describe_task(r.index, r.task_id) << " " << out->status << " in " << format_duration(out->wall_s);
   if (!out->error.empty()) msg << ": " << out->error;

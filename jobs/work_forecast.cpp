@@ -111,6 +111,14 @@ std::string describe(const WorkForecast& w, int workers) {
   return s;
 }
 
+double cpu_seconds_left(const std::vector<double>& queued, const std::vector<std::pair<double, double>>& running,
+                        int threads) {
+  double left = 0;
+  for (const double c : queued) left += c;
+  for (const auto& [c, wall] : running) left += std::max(0.0, c - std::max(0.0, wall) * threads);
+  return left;
+}
+
 TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) {
   TimeLeft t;
   std::vector<db::TaskRow> rows;
@@ -121,24 +129,25 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
   if (!scene || !scene->work) return t;
   const MeasuredSpeed speed = measure_speed(store, *scene);
   std::vector<nlohmann::json> all;
+  std::vector<double> pending;
+  std::vector<std::pair<double, double>> running;
   try {
     for (const auto& r : rows) {
-      std::vector<nlohmann::json> one{nlohmann::json::parse(r.params_json)};
-      double left = forecast_work(*scene, one, speed).core_seconds;
-      // A running task has used its wall time so far (one thread's worth: a guess
-      // for a task that runs several).
-      if (r.status == "running") {
-        ++t.running;
-        if (std::isfinite(r.started_at)) left = std::max(0.0, left - (now_unix_s - r.started_at));
-      } else {
-        ++t.pending;
-      }
-      t.core_seconds += left;
-      all.push_back(std::move(one.front()));
+      all.push_back(nlohmann::json::parse(r.params_json));
+      const double c = forecast_work(*scene, {all.back()}, speed).core_seconds;
+      // A running task has used its wall time so far: one thread's worth, a guess for
+      // a task that runs several (the database does not say how many).
+      if (r.status == "running")
+        running.emplace_back(c, std::isfinite(r.started_at) ? now_unix_s - r.started_at : 0.0);
+      else
+        pending.push_back(c);
     }
   } catch (const std::exception&) {
     return TimeLeft{};  // a stored task this build cannot read: no estimate rather than a wrong one
   }
+  t.pending = static_cast<int>(pending.size());
+  t.running = static_cast<int>(running.size());
+  t.core_seconds = cpu_seconds_left(pending, running, 1);
   t.forecast = forecast_work(*scene, all, speed);
   t.known = true;
   return t;

@@ -45,6 +45,11 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
 // (divide by --workers) at ..."; `workers` > 0 gives the wall time on that many instead.
 std::string describe(const WorkForecast& w, int workers = 0);
 
+// CPU seconds left: the queued tasks' forecast, plus what each running task's forecast
+// (first) has not used in `threads` times its wall time so far (second).
+double cpu_seconds_left(const std::vector<double>& queued, const std::vector<std::pair<double, double>>& running,
+                        int threads);
+
 // What is left of a job in a database: its pending tasks' forecast, and the part of
 // each running task's forecast its time since it started has not used.
 struct TimeLeft {

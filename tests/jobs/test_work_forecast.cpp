@@ -65,6 +65,14 @@ TEST(WorkForecast, MeasuredSpeedIsTheMedianOfCpuTimeOverTheYardstick) {
   EXPECT_EQ(jobs::measure_speed(scene, {}).tasks, 0);
 }
 
+TEST(WorkForecast, CpuSecondsLeftTakeWhatRunningTasksUsedOff) {
+  // Queued 10 + 20; running: 30 with 4 s of wall on 2 threads (8 used), 5 with 9 s
+  // (overdue: nothing left, not a negative), 7 with a clock gone backwards (nothing used).
+  EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({10, 20}, {{30, 4}, {5, 9}, {7, -3}}, 2), 10 + 20 + 22 + 0 + 7);
+  EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({}, {{30, 4}}, 1), 26);
+  EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({}, {}, 1), 0);
+}
+
 TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   test::TempDir d;
   const jobs::Job job = small_triaxial_job();
