@@ -119,6 +119,9 @@ int study(const StudyArgs& a) {
   }
   // Held until the study returns: its charts' data and scripts have fixed names.
   const jobs::FolderLock lock(o.out_dir, flag);
+  if (!lock.unsupported().empty())
+    std::cerr << "demcal: warning: " << flag << ": " << o.out_dir << " cannot be locked (" << lock.unsupported()
+              << "): a second study into it at the same time would not be stopped\n";
   if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {

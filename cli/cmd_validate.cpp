@@ -14,20 +14,24 @@ namespace {
 // At the speed of the database's done tasks of the scene when --db names one.
 void print_work(const jobs::Job& job, const std::string& db) {
   const jobs::SceneDef* scene = jobs::find_scene(job.scene);
-  if (!scene) return;
+  if (!scene || !scene->work) return;
   std::vector<nlohmann::json> params;
   for (const auto& t : job.tasks) params.push_back(t.params);
   jobs::MeasuredSpeed speed;
+  int done_untimed = 0;
   if (!db.empty()) {
     db::Store store(db, /*read_only=*/true);
     speed = jobs::measure_speed(store, *scene);
+    if (speed.tasks == 0)
+      for (const auto& t : store.tasks()) done_untimed += t.scene == job.scene && t.status == "done";
   }
-  const jobs::WorkForecast w = jobs::forecast_work(*scene, params, speed);
-  if (!w.known) return;
-  std::cout << "work: " << jobs::describe(w) << "\n";
+  std::cout << "work: " << jobs::describe(jobs::forecast_work(*scene, params, speed)) << "\n";
   if (!db.empty() && speed.tasks == 0)
-    std::cout << "work: " << db << " holds no done " << job.scene
-              << " task with its CPU time (cpu_s) to measure this machine's speed by\n";
+    std::cout << "work: " << db
+              << (done_untimed > 0 ? " holds " + std::to_string(done_untimed) + " done " + job.scene +
+                                         " task(s), all from a demcal before tasks stored their CPU time (cpu_s)"
+                                   : " holds no done " + job.scene + " task")
+              << ": the forecast is at the yardstick\n";
 }
 
 }  // namespace

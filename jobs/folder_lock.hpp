@@ -9,14 +9,17 @@ namespace demcal::jobs {
 
 class FolderLock {
  public:
-  // Takes the lock or throws JobError(flag) naming the folder and the holder's pid.
+  // Takes the lock or throws JobError(flag) naming the folder and the holder (pid and
+  // host). On a file system without locks it holds nothing and says why in unsupported().
   FolderLock(const std::string& dir, const std::string& flag);
   ~FolderLock();
   FolderLock(const FolderLock&) = delete;
   FolderLock& operator=(const FolderLock&) = delete;
+  const std::string& unsupported() const { return unsupported_; }
 
  private:
   int fd_ = -1;
+  std::string unsupported_;
 };
 
 }  // namespace demcal::jobs

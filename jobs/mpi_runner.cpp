@@ -1,5 +1,4 @@
 #include "mpi_runner.hpp"
-#include "private_temp_dir.hpp"
 
 #include "liveness.hpp"
 #include "stop_signal.hpp"
@@ -125,7 +124,6 @@ int serve(const MpiOptions& options) {
   const double hb = heartbeat_interval(options);
   const std::string who = "demcal: rank " + std::to_string(rank) + ": ";
   try {
-    const PrivateTempDir results("demcal-rank" + std::to_string(rank));  // the tasks' result files
     send(0, kTagReady, "");
     // Rank 0 answers every READY or RESULT at once (a task or STOP), except at the
     // start while it records the job; silence far beyond that means it is gone.
@@ -156,7 +154,12 @@ int serve(const MpiOptions& options) {
       t.snapshots = j.at("snapshots").get<bool>();
       t.task_key = j.at("task_key").get<std::string>();
       t.h5_path = j.at("h5_path").get<std::string>();
-      t.result_path = results.file("task" + std::to_string(t.task_id) + ".result.json");
+      // Beside the task's HDF5 file, as the local runner keeps them: a rank killed
+      // mid-task (a lost node, MPI_Abort) leaves no folder of its own in /tmp, and
+      // the rank in the name keeps a re-sent task's file apart from a lost rank's.
+      t.result_path = (std::filesystem::path(t.h5_path).parent_path() /
+                       (".task-" + std::to_string(t.task_id) + ".rank" + std::to_string(rank) + ".result.json"))
+                          .string();
       test_kill_rank_hook(t.index);
       const std::string beat = std::to_string(t.task_id);
       const std::string result = run_forked(t, hb, [&] { send(0, kTagHeartbeat, beat); });

@@ -73,9 +73,10 @@ TEST(Mpi, CrashingTaskFailsOnlyItsTask) {
 TEST(Mpi, KilledWorkerRankIsReportedAndRankZeroFinishes) {
   TempDir d;
   write(d.file("j.json"), collision_job("lost", kFactors));
+  fs::create_directories(d.path / "tmp");  // the ranks' TMPDIR: the lost one leaves nothing of demcal's there
   const auto t0 = std::chrono::steady_clock::now();
   const Result r = mpirun(3, {"--enable-recovery"}, {"run", "j.json", "--mpi", "--mpi-timeout", "3"}, d.path.string(),
-                          {{"DEMCAL_TEST_KILL_RANK_TASK", "1"}});
+                          {{"DEMCAL_TEST_KILL_RANK_TASK", "1"}, {"TMPDIR", d.file("tmp")}});
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // (mpirun --enable-recovery exits 0 whatever rank 0 returns; the log and the database tell.)
   EXPECT_NE(r.err.find("lost: no message for 3 s"), std::string::npos) << r.err;
@@ -87,6 +88,8 @@ TEST(Mpi, KilledWorkerRankIsReportedAndRankZeroFinishes) {
   EXPECT_EQ(rows[1].status, "failed");
   EXPECT_NE(rows[1].error.find("worker rank"), std::string::npos) << rows[1].error;
   EXPECT_NE(rows[1].error.find("lost"), std::string::npos) << rows[1].error;
+  for (const auto& e : fs::directory_iterator(d.path / "tmp"))
+    EXPECT_NE(e.path().filename().string().rfind("demcal", 0), 0u) << "left behind: " << e.path();
   // The lost task runs again on request.
   const Result retry = run_demcal({"run", "j.json", "--retry-failed"}, d.path.string());
   EXPECT_EQ(retry.rc, 0) << retry.err;

@@ -42,11 +42,11 @@ TEST(CliStudy, ASecondStudyIntoAFolderInUseIsRefused) {
   fs::create_directories(d.path / "charts");
   const int fd = ::open(d.file("charts/.demcal-lock").c_str(), O_RDWR | O_CREAT, 0644);
   ASSERT_GE(fd, 0);
-  ASSERT_EQ(::write(fd, "4242\n", 5), 5);
+  ASSERT_EQ(::write(fd, "pid 4242 on node7\n", 17), 17);
   ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
   Result r = run_demcal({"study", "grazing", "--out", "charts"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("--out: another demcal (pid 4242) is writing into charts: wait for it to finish, or give this "
+  EXPECT_NE(r.err.find("--out: another demcal (pid 4242 on node7) is writing into charts: wait for it to finish, or give this "
                        "one another folder"),
             std::string::npos) << r.err;
   r = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "charts"}, d.path.string());

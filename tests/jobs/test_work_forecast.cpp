@@ -102,7 +102,8 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   out.metrics = {{"cpu_s", 3.0 * yardstick(scene, job.tasks[0].params)}};
   ASSERT_TRUE(store.finish(rows[0].id, "w", out));
   ASSERT_TRUE(store.claim(rows[1].id, "w"));
-  t = jobs::time_left(store, job.name, db::unix_now() + 1.0);
+  const double started = store.task(rows[1].id)->started_at;
+  t = jobs::time_left(store, job.name, started + 1.0);
   ASSERT_TRUE(t.known);
   EXPECT_EQ(t.pending, 2);
   EXPECT_EQ(t.running, 1);
@@ -110,7 +111,7 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   EXPECT_NEAR(t.forecast.factor, 3.0, 1e-9);
   const double expected = 3.0 * (yardstick(scene, job.tasks[1].params) + yardstick(scene, job.tasks[2].params) +
                                  yardstick(scene, job.tasks[3].params)) - 1.0;
-  EXPECT_NEAR(t.core_seconds, expected, 0.05) << "the running task's second since it started is used";
+  EXPECT_NEAR(t.core_seconds, expected, 1e-6 * expected) << "the running task's second since it started is used";
   const std::string said = jobs::describe(t);
   EXPECT_NE(said.find("3 task(s) to go: "), std::string::npos) << said;
   EXPECT_NE(said.find(" at the 1 running now; at the speed of the last 1 done triaxial task(s)"), std::string::npos)
