@@ -83,6 +83,27 @@ void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t colu
   }
 }
 
+// A parameter whose value is a list or an object (a grading curve) would make its
+// column as wide as the curve's JSON: the cell says "grading #1", and each distinct
+// value is printed once under the table with its tasks, as --where takes it.
+void tag_structured(Table& t, const std::vector<ResultRow>& rows, const std::vector<std::string>& params,
+                    std::size_t first_column) {
+  for (std::size_t c = 0; c < params.size(); ++c) {
+    const std::string& key = params[c];
+    TextGroups groups;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      if (!rows[i].params.contains(key)) continue;
+      const nlohmann::json& v = rows[i].params[key];
+      if (!v.is_object() && !v.is_array()) continue;
+      const std::size_t k = groups.add(v.dump(), rows[i].task.id);
+      t.rows[i][first_column + c] = key + " #" + std::to_string(k + 1);
+    }
+    for (std::size_t k = 0; k < groups.texts.size(); ++k)
+      t.footnotes.push_back(key + " #" + std::to_string(k + 1) + " (" + task_list(groups.tasks[k], rows.size()) +
+                            "): " + key + "=" + groups.texts[k]);
+  }
+}
+
 std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool varying_only) {
   std::vector<std::string> keys;
   for (const auto& r : rows)
@@ -181,7 +202,10 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
     }
     t.rows.push_back(std::move(line));
   }
-  if (for_reading) tag_messages(t, rows, t.header.size() - 1);
+  if (for_reading) {
+    tag_structured(t, rows, params, 3);  // after task, job, status
+    tag_messages(t, rows, t.header.size() - 1);
+  }
   return t;
 }
 

@@ -272,6 +272,17 @@ TEST(Cli, GradingCurvesAreAGridAxisAndAWhereValue) {
   ASSERT_EQ(rows.size(), 1u) << r.out;
   EXPECT_EQ(rows[0]["params"]["grading"]["percent_finer"][1], 10.0);
   EXPECT_EQ(rows[0]["params"]["d_min"], 0.0006);
+  // A table for reading names each curve and prints it once below, ready for --where.
+  r = run_demcal({"query"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("  grading #2  "), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("grading #3"), std::string::npos) << r.out;
+  const std::string footnote = "grading #2 (task 2): grading=" + nlohmann::json::parse(rows[0]["params"]["grading"].dump()).dump();
+  EXPECT_NE(r.out.find(footnote), std::string::npos) << footnote << "\n" << r.out;
+  const std::string where = r.out.substr(r.out.find("grading #2 (task 2): ") + 21);
+  r = run_demcal({"query", "--where", where.substr(0, where.find('\n')), "--format", "csv"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 2) << "the header and task 2\n" << r.out;
   r = run_demcal({"query", "--where", "grading={\"d\": [0.0006, 0.002], \"percent_finer\": [0, 100]}"}, d.path.string());
   EXPECT_NE((r.out + r.err).find("no task matches"), std::string::npos) << r.out << r.err;
   r = run_demcal({"query", "--where", "grading={d: [0.0006]}"}, d.path.string());
