@@ -17,6 +17,7 @@ class Progress {
   Progress(std::ostream& err, bool terminal);
   void line(const std::string& text, const Counts& c);  // a state change
   void update(const Counts& c, double eta_s);            // redraw the bar (terminal only)
+  void set_eta(double eta_s) { eta_s_ = eta_s; }         // for the bar line() draws next
   void finish();
 
  private:

@@ -211,6 +211,7 @@ void Runner::launch(const db::TaskRow& row) {
   }
   store_.set_pid(row.id, pid);
   running_.push_back(Running{row.id, t.index, pid, t.result_path, std::chrono::steady_clock::now()});
+  progress_.set_eta(eta());
   progress_.line(describe_task(t.index, row.id) + " started", counts());
 }
 
@@ -286,6 +287,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   ++ran_;
   busy_s_ += out->wall_s;
   measure_speed_now();
+  progress_.set_eta(eta());
   std::ostringstream msg;
   msg << describe_task(r.index, r.task_id) << " " << out->status << " in " << format_duration(out->wall_s);
   if (!out->error.empty()) msg << ": " << out->error;
