@@ -225,8 +225,10 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     "dilating or phi_mob drifting; demcal query --job " + rs.job +
                                     " shows which): the surrogate takes them as critical-state values");
   for (const auto& [job, rs] : warned) {
+    // The first of the task's warnings (they are joined with "; "), cut at a word.
     std::string w = rs->first_warning;
-    if (w.size() > 160) w = w.substr(0, 157) + "...";
+    if (const auto semi = w.find("; "); semi != std::string::npos) w = w.substr(0, semi) + " (and more)";
+    if (w.size() > 240) w = w.substr(0, w.rfind(' ', 236)) + " ...";
     int used = 0;
     for (const auto& p : rs->points) used += static_cast<int>(p.values.size());
     cal.result.warnings.push_back(std::to_string(rs->warned) + " of the " + std::to_string(used) + " results used from job " +

@@ -88,6 +88,26 @@ std::vector<Segment> read_contours(const std::string& path) {
   return out;
 }
 
+
+// The fit's targets as "phi_peak = 40, phi_cv = 27", and whether one is on `wanted`.
+std::string fit_targets(const std::string& targets_json, const MetricSpec& wanted, bool& on_wanted) {
+  on_wanted = false;
+  const auto t = nlohmann::json::parse(targets_json, nullptr, false);
+  if (!t.is_array()) return "";
+  std::string text;
+  for (const auto& e : t) {
+    if (!e.is_object() || !e.contains("metric") || !e["metric"].is_string()) continue;
+    const std::string m = e["metric"].get<std::string>();
+    const MetricSpec s = metric_spec(m);
+    on_wanted = on_wanted || (s.plus == wanted.plus && s.minus == wanted.minus);
+    std::ostringstream os;
+    os << m;
+    if (e.contains("value") && e["value"].is_number()) os << " = " << e["value"].get<double>();
+    text += (text.empty() ? "" : ", ") + os.str();
+  }
+  return text;
+}
+
 }  // namespace
 
 void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
@@ -209,6 +229,12 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     g << "set label " << label++ << " " << quoted(level) << " at " << num(p.first) << "," << num(p.second)
       << ",0 center front boxed font ',8'\n";
   }
+  // What the drawn fit inverted, under the key (in the key, a long entry pushes
+  // others out of its fixed width).
+  if (r.overlay && !r.overlay->targets.empty())
+    g << "set label " << label++ << " " << quoted("95% region of fit " + std::to_string(r.overlay->fit_id) +
+                                                   ", targets " + r.overlay->targets)
+      << " at screen 0.5,0.155 center noenhanced font ',9'\n";
   g << "splot " << quoted(path("shown.dat")) << " using 1:2:3 with pm3d notitle, \\\n  " << quoted(path("iso.dat"))
     << " using 1:2:(0) with lines lc rgb 'black' lw 1 title 'iso-lines', \\\n  " << quoted(path("points.dat"))
     << " using 1:2:(0) with points pt 7 ps 0.9 lc rgb 'black' title 'grid points', \\\n  " << quoted(path("holes.dat"))
@@ -225,8 +251,10 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   image.commit();
 }
 
-std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job) {
+std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric) {
+  const MetricSpec wanted = metric_spec(metric);
   const auto rows = store.fits();
+  std::optional<MapOverlay> latest;  // of the job, whatever its targets
   for (auto it = rows.rbegin(); it != rows.rend(); ++it) {
     const auto j = nlohmann::json::parse(it->result_json, nullptr, false);
     if (j.is_discarded() || j.value("status", "") != "ok" || !j.contains("jobs") || !j["jobs"].is_array()) continue;
@@ -237,6 +265,8 @@ std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string
     try {
       MapOverlay o;
       o.fit_id = it->id;
+      bool on_metric = false;
+      o.targets = fit_targets(it->targets_json, wanted, on_metric);
       o.box = {j["box"]["theta_lo"].get<double>(), j["box"]["theta_hi"].get<double>(), j["box"]["eta_lo"].get<double>(),
                j["box"]["eta_hi"].get<double>()};
       o.region.n = j["region"]["n"].get<int>();
@@ -244,12 +274,13 @@ std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string
       o.theta = j["theta_deg"].get<double>();
       o.eta = j["eta"].get<double>();
       if (o.region.n < 2 || static_cast<int>(o.region.mask.size()) != o.region.n) continue;
-      return o;
+      if (on_metric) return o;
+      if (!latest) latest = o;
     } catch (const nlohmann::json::exception&) {
       continue;
     }
   }
-  return std::nullopt;
+  return latest;
 }
 
 }  // namespace demcal::calibrate

@@ -17,6 +17,7 @@ namespace demcal::calibrate {
 
 struct MapOverlay {
   std::int64_t fit_id = 0;
+  std::string targets;  // "phi_peak = 40, phi_cv = 27": what the fit inverted
   Box box;        // the fit's box (the region mask's frame)
   Region region;
   double theta = kNaN, eta = kNaN;
@@ -32,7 +33,8 @@ struct MapRequest {
 // Throws JobError("--out") for a wrong extension, std::runtime_error when gnuplot fails.
 void draw_map(const ResponseSurface& rs, const Surrogate& surrogate, const MapRequest& request);
 
-// The most recent successful fit stored for `job`, if any.
-std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job);
+// The most recent successful fit stored for `job` that had a target on `metric` (as
+// metric_spec reads it), else the most recent one of the job; nothing if it has none.
+std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric);
 
 }  // namespace demcal::calibrate

@@ -20,6 +20,11 @@ MetricSpec metric_spec(const std::string& name) {
   if (name == "phi_cv") return {name, "phi_cv (deg)", "phi_cv_deg", ""};
   if (name == "phi_diff") return {name, "phi_peak - phi_cv (deg)", "phi_peak_deg", "phi_cv_deg"};
   if (name == "repose") return {name, "angle of repose (deg)", "repose_deg", ""};
+  // A stored name an alias reads (phi_peak_deg) is labelled as the alias is.
+  for (const auto& a : metric_aliases()) {
+    const MetricSpec s = metric_spec(a);
+    if (s.minus.empty() && s.plus == name) return {name, s.label, s.plus, ""};
+  }
   return {name, name, name, ""};
 }
 

@@ -49,7 +49,7 @@ void add_map(CLI::App& app, int& exit_code) {
         throw jobs::JobError("--job", "job \"" + job + "\", " + a->metric + ": " + e.what());
       }
       std::optional<calibrate::MapOverlay> overlay;
-      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job);
+      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job, a->metric);
       calibrate::MapRequest mr;
       mr.out = out;
       mr.overlay = overlay ? &*overlay : nullptr;
@@ -61,7 +61,9 @@ void add_map(CLI::App& app, int& exit_code) {
         if (p.hole() && !p.refine)
           std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.failed << " failed, " << p.unfinished
                     << " not finished, " << p.missing << " without the metric)\n";
-      if (overlay) std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id << "\n";
+      if (overlay)
+        std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
+                  << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";
       return kOk;
     });
   });

@@ -16,7 +16,7 @@ void add_query(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<Args>();
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--job", a->job, "only this job's tasks");
-  cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable");
+  cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable, and a task must match every one");
   cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated), or all; default: every metric in CSV and JSON, the scene's headline metrics in a table")->delimiter(',');
   cmd->add_option("--format", a->format, "table, csv or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
@@ -30,8 +30,10 @@ void add_query(CLI::App& app, int& exit_code) {
         std::cerr << "demcal: error: --job: no job named \"" << a->job << "\"\n";
         return kBadInput;
       }
-      const auto rows = jobs::select_rows(store, a->job, where);
-      if (rows.empty()) std::cerr << "demcal: no task matches" << (where.empty() ? "" : " the --where filters") << "\n";
+      std::string why;
+      const auto rows = jobs::select_rows(store, a->job, where, &why);
+      if (rows.empty())
+        std::cerr << "demcal: no task matches" << (where.empty() ? "" : " the --where filters: " + why) << "\n";
       const int hidden = jobs::print_rows(std::cout, rows, a->metrics, format);
       if (hidden > 0)
         std::cout << "(" << hidden << " more metrics per task: --metrics all, or --format csv or json)\n";

@@ -79,8 +79,12 @@ std::string SieveCurve::problem() const {
     if (i > 0 && !(d[i] > d[i - 1])) return at + "sizes must increase from one point to the next";
     if (i > 0 && finer[i] < finer[i - 1]) return at + "the mass finer must not decrease as the size grows";
   }
-  if (finer.front() != 0.0) return "the first size must have nothing finer (0%): it is the smallest grain";
-  if (finer.back() != 1.0) return "the last size must have everything finer (100%): it is the largest grain";
+  if (finer.front() != 0.0)
+    return "the first size must have nothing finer (0%): it is the smallest grain (a sieve analysis whose finest "
+           "sieve passes some mass needs a smaller size at 0% below it)";
+  if (finer.back() != 1.0)
+    return "the last size must have everything finer (100%): it is the largest grain (add the size that passes "
+           "everything at 100%)";
   return "";
 }
 

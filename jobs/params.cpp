@@ -48,7 +48,11 @@ nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
   const char* form = "{\"d\": [sizes in m, increasing], \"percent_finer\": [percent of the mass finer, 0 ... 100]}";
   if (!v.is_object()) throw JobError(path, std::string("expected ") + form + ", got " + describe(v));
   for (const auto& [k, x] : v.items())
-    if (k != "d" && k != "percent_finer") throw JobError(path + "." + k, std::string("unknown key (expected ") + form + ")");
+    if (k != "d" && k != "percent_finer") {
+      const std::string guess = closest(k, {"d", "percent_finer"});
+      throw JobError(path + "." + k, "unknown key" + (guess.empty() ? "" : " (did you mean \"" + guess + "\"?)") +
+                                         "; expected " + form);
+    }
   nlohmann::json out = nlohmann::json::object();
   for (const char* k : {"d", "percent_finer"}) {
     const std::string at = path + "." + k;

@@ -353,7 +353,33 @@ nlohmann::json parse_stored_params(const std::string& text) {
 }
 }  // namespace
 
-std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where) {
+namespace {
+// The first filter that alone matches no row, with the values its key takes.
+std::string why_none_match(const std::vector<ResultRow>& all, const std::vector<Where>& where) {
+  for (const auto& w : where) {
+    std::vector<std::string> values;
+    bool any = false;
+    for (const auto& r : all) {
+      nlohmann::json v = special(r.task, w.key);
+      if (v.is_null()) v = r.params.contains(w.key) ? r.params[w.key] : nlohmann::json();
+      if (v.is_null()) continue;
+      any = any || value_matches(v, w.value);
+      const std::string text = cell(v, false);
+      if (std::find(values.begin(), values.end(), text) == values.end()) values.push_back(text);
+    }
+    if (any) continue;
+    constexpr std::size_t kShown = 12;
+    std::string list;
+    for (std::size_t k = 0; k < values.size() && k < kShown; ++k) list += (k ? ", " : "") + values[k];
+    if (values.size() > kShown) list += ", ... (" + std::to_string(values.size()) + " values)";
+    return w.key + "=" + w.value + " matches no task; " + w.key + " takes " + list + " here";
+  }
+  return "each filter matches some task, but no task matches them all (filters on one key are not alternatives)";
+}
+}  // namespace
+
+std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where,
+                                   std::string* why_none) {
   std::vector<ResultRow> all;
   for (auto& t : store.tasks(job)) {
     ResultRow r;
@@ -364,7 +390,18 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
   for (const auto& w : where) {
     const bool known = special(db::TaskRow{}, w.key) != nullptr ||
                        std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return r.params.contains(w.key); });
-    if (!known && !all.empty()) throw JobError("--where", "no task has a parameter \"" + w.key + "\"");
+    if (!known && !all.empty()) {
+      std::vector<std::string> keys = {"status", "scene", "task"};
+      for (const auto& r : all)
+        for (const auto& [k, v] : r.params.items())
+          if (std::find(keys.begin(), keys.end(), k) == keys.end()) keys.push_back(k);
+      std::string guess;  // theta -> theta_deg before any near spelling (eta)
+      for (const auto& k : keys)
+        if (guess.empty() && k.rfind(w.key + "_", 0) == 0) guess = k;
+      if (guess.empty()) guess = closest(w.key, keys);
+      throw JobError("--where", "no task has a parameter \"" + w.key + "\"" +
+                                    (guess.empty() ? "" : " (did you mean \"" + guess + "\"?)"));
+    }
     check_where_value(all, w);
   }
   std::vector<ResultRow> out;
@@ -381,6 +418,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     r.xdmf = task_artifact(store, r.task.id, "xdmf");
     out.push_back(std::move(r));
   }
+  if (out.empty() && why_none) *why_none = why_none_match(all, where);
   return out;
 }
 

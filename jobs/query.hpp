@@ -28,7 +28,10 @@ struct ResultRow {
 
 // Keys: any task parameter, or status, scene, task (the id). Numbers compare as
 // numbers (30 matches 30.0), booleans as true/false. A key no task has is an error.
-std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where);
+// When no row matches, `why_none` (if given) receives the first filter that matches
+// no task on its own and the values its key takes ("eta takes 0, 0.1, 0.3 here").
+std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where,
+                                   std::string* why_none = nullptr);
 
 // A task's file of one kind ("hdf5", "xdmf") as the database records it, "" when it has none.
 std::string task_artifact(db::Store& store, std::int64_t task_id, const std::string& kind);

@@ -7,8 +7,12 @@
 #   JOB=examples/collision.json DB=my.db scripts/quickstart.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
 BUILD_DIR=${BUILD_DIR:-build}
+# The command-line tool only (the tests and benchmarks are scripts/test.sh's), its
+# compiler output in a log.
+mkdir -p "$BUILD_DIR"
+BUILD_DIR="$BUILD_DIR" BUILD_TARGETS=${BUILD_TARGETS:-demcal} BUILD_LOG=${BUILD_LOG:-$BUILD_DIR/build.log} \
+  bash scripts/setup.sh
 JOB=${JOB:-examples/quickstart.json}
 DB=${DB:-demcal.db}
 PHI_PEAK=${PHI_PEAK:-40}

@@ -4,6 +4,9 @@
 #   BUILD_DIR   build folder (default: build)
 #   BUILD_TYPE  CMake build type (default: Release)
 #   DEMCAL_SKIP_BUILD=1  install packages only
+#   BUILD_TARGETS  what to build (default: everything, tests and benchmarks included)
+#   BUILD_LOG      the compiler's output goes to this file instead of the terminal
+#                  (its last lines are shown if the build fails)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -33,4 +36,15 @@ BUILD_DIR=${BUILD_DIR:-build}
 BUILD_TYPE=${BUILD_TYPE:-Release}
 JOBS=${JOBS:-$(nproc)}
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE="$BUILD_TYPE" ${CMAKE_ARGS:-} >/dev/null
-cmake --build "$BUILD_DIR" -j "$JOBS"
+build=(cmake --build "$BUILD_DIR" -j "$JOBS")
+[ -n "${BUILD_TARGETS:-}" ] && build+=(--target ${BUILD_TARGETS})
+if [ -n "${BUILD_LOG:-}" ]; then
+  echo "setup: building ${BUILD_TARGETS:-everything} in $BUILD_DIR (a few minutes the first time; output in $BUILD_LOG)" >&2
+  if ! "${build[@]}" > "$BUILD_LOG" 2>&1; then
+    tail -n 40 "$BUILD_LOG" >&2
+    echo "setup: the build failed; the whole output is in $BUILD_LOG" >&2
+    exit 1
+  fi
+else
+  "${build[@]}"
+fi

@@ -126,6 +126,20 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   const double ss = t0["surrogate_sigma"].get<double>();
   EXPECT_GT(ss, 0.0);
   EXPECT_NEAR(t0["sigma"].get<double>(), std::sqrt(0.25 + ss * ss), 1e-12);
+  // A later fit on phi_peak alone: the phi_cv map keeps the latest fit that had a
+  // phi_cv target, the phi_peak map takes the new one; each says what it inverted.
+  r = run_demcal({"fit", "--target", pk}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  r = run_demcal({"map", "--metric", "phi_cv_deg", "--out", "cv.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("95% region and best point of fit 2 (targets phi_peak = "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(", phi_cv = "), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("cv.svg")).find("95% region of fit 2, targets phi_peak = "), std::string::npos);
+  EXPECT_NE(slurp(d.file("cv.svg")).find("phi_cv (deg)"), std::string::npos) << "a stored name gets the alias's label";
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "pk.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("95% region and best point of fit 3 (targets phi_peak = "), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("phi_cv = "), std::string::npos) << r.out;
 }
 
 TEST(CalibrateCli, FitCountsTheReplicaCorrelationOfOneJobsMetrics) {

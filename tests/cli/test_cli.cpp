@@ -166,7 +166,14 @@ TEST(Cli, RunQueryStatusAndResume) {
   EXPECT_NE(r.err.find("task is a task id"), std::string::npos) << r.err;
   r = run_demcal({"query", "--where", "dt_factor=0.3"}, d.path.string());
   EXPECT_EQ(r.rc, 0);
-  EXPECT_NE(r.err.find("no task matches"), std::string::npos) << r.err;
+  // Which filter matched nothing, and what its key takes.
+  EXPECT_NE(r.err.find("no task matches the --where filters: dt_factor=0.3 matches no task; dt_factor takes 0.05, 0.1"),
+            std::string::npos) << r.err;
+  r = run_demcal({"query", "--where", "dt_factor=0.1", "--where", "dt_factor=0.05"}, d.path.string());
+  EXPECT_NE(r.err.find("no task matches them all (filters on one key are not alternatives)"), std::string::npos) << r.err;
+  r = run_demcal({"query", "--where", "sample=20"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("no task has a parameter \"sample\" (did you mean \"sample_every\"?)"), std::string::npos) << r.err;
   // One row varies nothing: the table shows no parameter columns (JSON and CSV keep them).
   r = run_demcal({"query", "--where", "dt_factor=0.1"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
