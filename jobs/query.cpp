@@ -351,9 +351,7 @@ nlohmann::json parse_stored_params(const std::string& text) {
     return nlohmann::json::value_t::discarded;
   }
 }
-}  // namespace
 
-namespace {
 // The first filter that alone matches no row, with the values its key takes.
 std::string why_none_match(const std::vector<ResultRow>& all, const std::vector<Where>& where) {
   for (const auto& w : where) {

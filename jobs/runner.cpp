@@ -135,13 +135,11 @@ void Runner::prepare() {
   try {
     if (scene_ && scene_->work) {
       std::vector<nlohmann::json> params;
-      for (const auto& t : queue_) {
-        params.push_back(nlohmann::json::parse(t.params_json));
-        yardstick_s_[t.id] = forecast_work(*scene_, {params.back()}).core_seconds;
-      }
+      for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
       speed_ = measure_speed(store_, *scene_);
-      *opt_.log << "work of the " << queue_.size() << " task(s) to run: "
-                << describe(forecast_work(*scene_, params, speed_), parallel) << "\n";
+      const WorkForecast w = forecast_work(*scene_, params, speed_);
+      for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor;
+      *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }
   } catch (const std::exception&) {
   }

@@ -69,7 +69,8 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
     const Work w = scene.work(p);
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
-    f.core_seconds += yardstick_seconds(w) * f.factor;
+    f.task_core_seconds.push_back(yardstick_seconds(w) * f.factor);
+    f.core_seconds += f.task_core_seconds.back();
   }
   return f;
 }
@@ -128,27 +129,27 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
   const SceneDef* scene = find_scene(rows.front().scene);
   if (!scene || !scene->work) return t;
   const MeasuredSpeed speed = measure_speed(store, *scene);
-  std::vector<nlohmann::json> all;
-  std::vector<double> pending;
-  std::vector<std::pair<double, double>> running;
   try {
-    for (const auto& r : rows) {
-      all.push_back(nlohmann::json::parse(r.params_json));
-      const double c = forecast_work(*scene, {all.back()}, speed).core_seconds;
-      // A running task has used its wall time so far: one thread's worth, a guess for
-      // a task that runs several (the database does not say how many).
-      if (r.status == "running")
-        running.emplace_back(c, std::isfinite(r.started_at) ? now_unix_s - r.started_at : 0.0);
-      else
-        pending.push_back(c);
-    }
+    std::vector<nlohmann::json> all;
+    for (const auto& r : rows) all.push_back(nlohmann::json::parse(r.params_json));
+    t.forecast = forecast_work(*scene, all, speed);
   } catch (const std::exception&) {
     return TimeLeft{};  // a stored task this build cannot read: no estimate rather than a wrong one
+  }
+  std::vector<double> pending;
+  std::vector<std::pair<double, double>> running;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const double c = t.forecast.task_core_seconds[k];
+    // A running task has used its wall time so far: one thread's worth, a guess for
+    // a task that runs several (the database does not say how many).
+    if (rows[k].status == "running")
+      running.emplace_back(c, std::isfinite(rows[k].started_at) ? now_unix_s - rows[k].started_at : 0.0);
+    else
+      pending.push_back(c);
   }
   t.pending = static_cast<int>(pending.size());
   t.running = static_cast<int>(running.size());
   t.core_seconds = cpu_seconds_left(pending, running, 1);
-  t.forecast = forecast_work(*scene, all, speed);
   t.known = true;
   return t;
 }

@@ -577,8 +577,9 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
       not_at_rest = os.str();
       if (cfg.rest_profile_window > 0.0) {
         const auto col = [&](const char* name) {
+          const std::size_t c = res.energy.column(name);
           std::vector<double> v;
-          for (const auto& row : res.energy.rows) v.push_back(row[res.energy.column(name)]);
+          for (const auto& row : res.energy.rows) v.push_back(row[c]);
           return v;
         };
         still = heap_stillness(col("time"), col("front_x"), col("repose_deg"), w.time() - cfg.rest_profile_window,
