@@ -373,7 +373,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
       serving = serving || (!k.lost && !k.stopped);
     }
     if (!busy && !serving) break;  // every rank stopped or lost
-    progress.update(live, -1);
+    progress.update(live, Eta{});
     if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
 

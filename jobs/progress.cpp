@@ -29,8 +29,8 @@ void Progress::line(const std::string& text, const Counts& c) {
   err_.flush();
 }
 
-void Progress::update(const Counts& c, double eta_s) {
-  eta_s_ = eta_s;
+void Progress::update(const Counts& c, Eta eta) {
+  eta_ = eta;
   if (!terminal_) return;
   const auto now = std::chrono::steady_clock::now();
   if (now - last_draw_ < std::chrono::milliseconds(200)) return;
@@ -45,7 +45,8 @@ void Progress::draw(const Counts& c) {
   std::string bar(static_cast<std::size_t>(filled), '#');
   bar.resize(static_cast<std::size_t>(width), ' ');
   err_ << "\r\033[K[" << bar << "] " << c.done << " done, " << c.failed << " failed, " << c.running << " running, "
-       << (c.total - c.done - c.failed - c.running) << " queued  ETA " << format_duration(eta_s_);
+       << (c.total - c.done - c.failed - c.running) << " queued  ETA " << (eta_.at_most && eta_.s >= 0 ? "<= " : "")
+       << format_duration(eta_.s);
   bar_shown_ = true;
 }
 

@@ -12,12 +12,18 @@ struct Counts {
   int total = 0, done = 0, failed = 0, running = 0;
 };
 
+// Seconds left (< 0: unknown); at_most: a bound (every task to its time limit), drawn "<=".
+struct Eta {
+  double s = -1;
+  bool at_most = false;
+};
+
 class Progress {
  public:
   Progress(std::ostream& err, bool terminal);
   void line(const std::string& text, const Counts& c);  // a state change
-  void update(const Counts& c, double eta_s);            // redraw the bar (terminal only)
-  void set_eta(double eta_s) { eta_s_ = eta_s; }         // for the bar line() draws next
+  void update(const Counts& c, Eta eta);            // redraw the bar (terminal only)
+  void set_eta(Eta eta) { eta_ = eta; }             // for the bar line() draws next
   void finish();
 
  private:
@@ -25,7 +31,7 @@ class Progress {
   std::ostream& err_;
   bool terminal_;
   bool bar_shown_ = false;
-  double eta_s_ = -1;
+  Eta eta_;
   std::chrono::steady_clock::time_point last_draw_{};
 };
 

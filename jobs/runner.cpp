@@ -68,8 +68,8 @@ class Runner {
   void say_holders(std::string& said);
   // Wall seconds left for this run's queued and running tasks: their forecast at the
   // speed measured in the database (re-measured as tasks finish); without a forecast,
-  // the mean of the tasks this run finished.
-  double eta();
+  // the mean of the tasks this run finished. A bound while the forecast is one.
+  Eta eta();
   double forecast_eta() const;
   void measure_speed_now();
 
@@ -86,6 +86,7 @@ class Runner {
   const SceneDef* scene_ = find_scene(job_.scene);
   std::unordered_map<std::int64_t, double> yardstick_s_;  // task id -> its forecast core-seconds at factor 1
   MeasuredSpeed speed_;
+  bool work_is_bound_ = false;  // the scene forecasts every stage to its limit (until measured)
   Counts counts_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
   bool superseded_ = false;  // another run recorded another spec under this job's name
@@ -139,6 +140,7 @@ void Runner::prepare() {
       speed_ = measure_speed(store_, *scene_);
       const WorkForecast w = forecast_work(*scene_, params, speed_);
       for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor;
+      work_is_bound_ = w.upper_bound;
       *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }
   } catch (const std::exception&) {
@@ -254,15 +256,15 @@ void Runner::measure_speed_now() {
   }
 }
 
-double Runner::eta() {
+Eta Runner::eta() {
   if (!yardstick_s_.empty()) {
     const double s = forecast_eta();
-    if (s >= 0) return s;
+    if (s >= 0) return Eta{s, work_is_bound_ && speed_.tasks == 0};
   }
-  if (ran_ == 0) return -1;
+  if (ran_ == 0) return Eta{};
   const double per_task = busy_s_ / ran_;
   const int left = counts_.total - counts_.done - counts_.failed;
-  return per_task * left / std::max(1, std::min(workers_, left));
+  return Eta{per_task * left / std::max(1, std::min(workers_, left)), false};
 }
 
 void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {

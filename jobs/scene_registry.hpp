@@ -29,6 +29,7 @@ struct SceneOutput {
 struct Work {
   double steps = 0, grains = 0;
   double ns_per_grain_step = 0;  // the scene's speed on one core of the project's machine
+  bool upper_bound = false;      // steps to every stage's limit: a run that ends sooner costs less
 };
 
 struct SceneDef {

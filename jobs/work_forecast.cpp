@@ -67,6 +67,8 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
   f.lo = INFINITY;
   for (const auto& p : task_params) {
     const Work w = scene.work(p);
+    // Measured CPU time already holds how soon such tasks end.
+    f.upper_bound = f.upper_bound || (w.upper_bound && speed.tasks == 0);
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
     f.task_core_seconds.push_back(yardstick_seconds(w) * f.factor);
@@ -91,6 +93,10 @@ std::string duration(double seconds) {
   return os.str();
 }
 std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }
+std::string approx(double seconds, bool upper_bound) {
+  if (!upper_bound) return approx(seconds);
+  return seconds < 60.0 ? "at most a minute" : "at most " + duration(seconds);
+}
 std::string speed_source(const WorkForecast& w) {
   if (w.measured_on == 0) return "the speed docs/performance.md measures on this project's machine";
   std::ostringstream os;
@@ -103,9 +109,9 @@ std::string speed_source(const WorkForecast& w) {
 
 std::string describe(const WorkForecast& w, int workers) {
   std::string s = w.of + " is " + sig2(w.lo) + (w.hi > w.lo * 1.005 ? " to " + sig2(w.hi) : std::string()) +
-                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds) +
+                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds, w.upper_bound) +
                   " of one core (" +
-                  (workers > 0 ? approx(w.core_seconds / workers) + " on " + std::to_string(workers) + " worker(s)"
+                  (workers > 0 ? approx(w.core_seconds / workers, w.upper_bound) + " on " + std::to_string(workers) + " worker(s)"
                                : std::string("divide by --workers")) +
                   ") at " + speed_source(w);
   if (!w.left_out.empty()) s += "; " + w.left_out;
@@ -155,9 +161,11 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
 }
 
 std::string describe(const TimeLeft& t) {
-  std::string s = std::to_string(t.pending + t.running) + " task(s) to go: " + approx(t.core_seconds) + " of one core";
+  const bool bound = t.forecast.upper_bound;
+  std::string s =
+      std::to_string(t.pending + t.running) + " task(s) to go: " + approx(t.core_seconds, bound) + " of one core";
   if (t.running > 0)
-    s += ", " + approx(t.core_seconds / t.running) + " at the " + std::to_string(t.running) + " running now";
+    s += ", " + approx(t.core_seconds / t.running, bound) + " at the " + std::to_string(t.running) + " running now";
   s += "; at " + speed_source(t.forecast);
   if (!t.forecast.left_out.empty()) s += "; " + t.forecast.left_out;
   return s;

@@ -21,6 +21,7 @@ struct WorkForecast {
   double grain_steps = 0;  // all tasks
   double core_seconds = 0;
   std::vector<double> task_core_seconds;  // each task's, in the order given
+  bool upper_bound = false;  // every stage to its limit at the yardstick: a bound, not an estimate
   int measured_on = 0;    // done tasks the speed was measured on (0: the project's yardstick)
   double factor = 1;      // their CPU time over the yardstick's forecast of it
   std::string scene;

@@ -136,6 +136,49 @@ StepForecast ReposeConfig::step_forecast() const {
   return forecast_step(in, material.d_min, material.d_max, material.density, dt, dt_factor);
 }
 
+namespace {
+double domain_length_of(const ReposeConfig& c) {
+  return c.domain_length > 0.0 ? c.domain_length : c.column_width + 4.0 * c.column_height + 0.02;
+}
+
+// The rough floor's square grid: cells aligned with x = 0 and x = column_width, so
+// that no floor grain straddles the gate plane.
+struct FloorGrid {
+  int nx = 1, ny = 1;
+  double sx = 0, sy = 0;
+};
+FloorGrid floor_grid(const ReposeConfig& c) {
+  const double s0 = c.floor_spacing > 0.0 ? c.floor_spacing : c.material.d_max;
+  const double depth = c.slab_depth_diameters * c.material.grading().mean();
+  FloorGrid f;
+  const int nx_col = std::max(1, static_cast<int>(std::floor(c.column_width / s0)));
+  f.sx = c.column_width / nx_col;
+  f.nx = static_cast<int>(std::floor(domain_length_of(c) / f.sx));
+  f.ny = std::max(1, static_cast<int>(std::floor(depth / s0)));
+  f.sy = depth / f.ny;
+  return f;
+}
+}  // namespace
+
+ReposeConfig::GrainEstimate ReposeConfig::grain_estimate() const {
+  const double depth = slab_depth_diameters * material.grading().mean();
+  GrainEstimate g;
+  g.column = std::ceil(overfill * target_solid_fraction * column_width * column_height * depth /
+                       (kPi / 6.0 * material.grading().mean_cube()));
+  // In floating point: a typo's grid (a 100 km domain) must not overflow an int here.
+  const double s0 = floor_spacing > 0.0 ? floor_spacing : material.d_max;
+  g.floor = std::ceil(domain_length_of(*this) / s0) * std::max(1.0, std::floor(depth / s0));
+  if (g.floor < 1e7) {
+    const FloorGrid f = floor_grid(*this);
+    g.floor = static_cast<double>(f.nx) * f.ny;
+  }
+  return g;
+}
+
+double ReposeConfig::max_steps() const {
+  return std::ceil((2.0 * settle_time_limit + time_limit) / step_forecast().dt);
+}
+
 void ReposeConfig::validate() const {
   material.validate();
   positive(column_width, "repose.column_width");
@@ -199,15 +242,11 @@ void ReposeConfig::validate() const {
     throw ConfigError("repose.column_height", "must hold at least two of the largest grains");
   // The grain count follows from the sizes: checked here, where a typo (a 10 m
   // column, a slab 1000 diameters deep) would otherwise run out of memory mid-task.
-  const double column_grains = overfill * target_solid_fraction * column_width * column_height * depth /
-                               (kPi / 6.0 * material.grading().mean_cube());
-  const double length = domain_length > 0.0 ? domain_length : column_width + 4.0 * column_height + 0.02;
-  const double spacing = floor_spacing > 0.0 ? floor_spacing : material.d_max;
-  const double floor_grains = std::ceil(length / spacing) * std::ceil(depth / spacing);
-  if (!(column_grains + floor_grains <= kMaxReposeGrains)) {
+  const GrainEstimate grains = grain_estimate();
+  if (!(grains.column + grains.floor <= kMaxReposeGrains)) {
     std::ostringstream os;
     os << "column " << column_width << " m x " << column_height << " m, slab " << depth << " m deep: about "
-       << static_cast<double>(static_cast<long long>((column_grains + floor_grains) / 1e5)) / 10.0
+       << static_cast<double>(static_cast<long long>((grains.column + grains.floor) / 1e5)) / 10.0
        << " million grains, more than this scene takes (" << kMaxReposeGrains / 1e6
        << " million); check repose.column_width, repose.column_height and repose.depth_diameters";
     throw ConfigError("repose.column_width", os.str());
@@ -283,7 +322,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   const double m_mean = mat.density * v_mean;
   const double W = cfg.column_width, H = cfg.column_height;
   const double Ly = cfg.slab_depth_diameters * d_mean;
-  const double L = cfg.domain_length > 0.0 ? cfg.domain_length : W + 4.0 * H + 0.02;
+  const double L = domain_length_of(cfg);
   const double g = cfg.gravity;
   const double bin = cfg.bin_width > 0.0 ? cfg.bin_width : d_mean;
   res.column_width = W;
@@ -316,15 +355,11 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
 
   std::mt19937_64 rng(cfg.seed);
 
-  // Floor: one layer of fixed grains on a jittered square grid resting on z = 0.
-  // Cells are aligned with x = 0 and x = W so that no floor grain straddles the
-  // gate plane; each grain stays inside its cell.
-  const double s0 = cfg.floor_spacing > 0.0 ? cfg.floor_spacing : mat.d_max;
-  const int nx_col = std::max(1, static_cast<int>(std::floor(W / s0)));
-  const double sx = W / nx_col;
-  const int nx = static_cast<int>(std::floor(L / sx));
-  const int ny = std::max(1, static_cast<int>(std::floor(Ly / s0)));
-  const double sy = Ly / ny;
+  // Floor: one layer of fixed grains on a jittered square grid resting on z = 0;
+  // each grain stays inside its cell.
+  const FloorGrid grid = floor_grid(cfg);
+  const int nx = grid.nx, ny = grid.ny;
+  const double sx = grid.sx, sy = grid.sy;
   Particles floor_all;
   auto lay_floor = [&](auto draw_diameter) {
     for (int ix = 0; ix < nx; ++ix)

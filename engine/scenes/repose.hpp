@@ -117,6 +117,17 @@ struct ReposeConfig {
 
   void validate() const;  // throws ConfigError naming the field
   StepForecast step_forecast() const;  // for job validation (timestep.hpp)
+
+  // Grains the task generates, from the sizes alone: the column before levelling
+  // trims it (overfill included) and the rough floor. validate()'s bound on typos,
+  // and the cost forecast's grain count.
+  struct GrainEstimate {
+    double column = 0, floor = 0;
+  };
+  GrainEstimate grain_estimate() const;
+  // The most steps a task can take: both preparation settlings and the collapse, each
+  // to its time limit (a heap that comes to rest sooner stops sooner).
+  double max_steps() const;
 };
 
 struct ReposeResult {

@@ -8,11 +8,21 @@
 #include "engine/scenes/repose.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace demcal::jobs {
 namespace {
 
 const char* const kSection = "repose";
+// Whole runs on one thread of the 2-core machine docs/performance.md describes
+// (2026-11-27; CPU time over steps and the grains grain_estimate() counts): 95 ns per
+// grain-step for the quick preset's ~420 grains, 132 for the standard preset's
+// ~5,400, interpolated in log N. A yardstick, not a promise for another machine.
+double ns_per_grain_step(double grains) {
+  const double x0 = std::log10(420.0), x1 = std::log10(5400.0), y0 = 95.0, y1 = 132.0;
+  const double g = std::clamp(std::log10(std::max(grains, 1.0)), x0, x1);
+  return y0 + (y1 - y0) * (g - x0) / (x1 - x0);
+}
 
 std::vector<ParamSpec> repose_params() {
   std::vector<ParamSpec> p = material_params();
@@ -196,11 +206,18 @@ SceneDef scene_repose() {
                                 "time_to_rest_s", "particles", "wall_s"},
                   /*forecast=*/[](const nlohmann::json& p) { return config_from(p).step_forecast(); },
                   /*advice=*/nullptr,
-                  // How long a heap takes to come to rest, and how many grains its
-                  // column holds, are known only once it runs.
-                  /*work=*/nullptr,
-                  /*work_of=*/"",
-                  /*work_left_out=*/""};
+                  // How long a heap takes to come to rest is known only once it runs:
+                  // the forecast is the bound of every stage's time limit until done
+                  // tasks in the database say what the scene costs.
+                  /*work=*/
+                  [](const nlohmann::json& p) {
+                    const engine::ReposeConfig c = config_from(p);
+                    const engine::ReposeConfig::GrainEstimate g = c.grain_estimate();
+                    return Work{c.max_steps(), g.column + g.floor, ns_per_grain_step(g.column + g.floor), /*upper_bound=*/true};
+                  },
+                  /*work_of=*/"the run to every stage's time limit",
+                  /*work_left_out=*/"a heap that comes to rest sooner costs less (the example jobs' tasks took 12-40% of it); once done "
+                                    "repose tasks are in the database, validate --db and run forecast at what they cost"};
 }
 
 }  // namespace demcal::jobs

@@ -354,6 +354,14 @@ TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
   EXPECT_FALSE(r.energy.rows.empty());
   for (const Series* s : {&r.energy, &r.prep, &r.profile})  // HDF5 writes one unit per column
     EXPECT_EQ(s->units.size(), s->columns.size()) << s->name;
+  // What the cost forecast counts before a run: every floor grain, a column no smaller
+  // than levelling kept, and a run to its limits takes no more steps than that bound.
+  const ReposeConfig::GrainEstimate g = c.grain_estimate();
+  EXPECT_EQ(g.floor, static_cast<double>(r.floor_particles));
+  EXPECT_GE(g.column, static_cast<double>(r.particles));
+  EXPECT_LT(g.column, 1.3 * static_cast<double>(r.particles));
+  EXPECT_GT(r.steps, 0);
+  EXPECT_LE(static_cast<double>(r.steps), c.max_steps());
 }
 
 TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {

@@ -3,10 +3,12 @@
 #include "../temp_dir.hpp"
 #include "db/store.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/progress.hpp"
 #include "jobs/work_forecast.hpp"
 
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -125,4 +127,52 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
     ASSERT_TRUE(store.finish(rows[k].id, "w", out));
   }
   EXPECT_FALSE(jobs::time_left(store, job.name, db::unix_now()).known);
+}
+
+TEST(WorkForecast, ReposeIsBoundedByItsTimeLimitsUntilDoneTasksSayWhatItCosts) {
+  const jobs::Job job = jobs::parse_job(R"({"name": "rp", "scene": "repose", "fidelity": "quick",
+                                            "grid": {"eta": [0.1]}, "repose": {"time_limit": [1.0, 3.0]}})",
+                                        "rp.json");
+  const jobs::SceneDef& scene = *jobs::find_scene("repose");
+  ASSERT_EQ(job.tasks.size(), 2u);
+  std::vector<nlohmann::json> params;
+  for (const auto& t : job.tasks) params.push_back(t.params);
+  const jobs::WorkForecast bound = jobs::forecast_work(scene, params);
+  ASSERT_TRUE(bound.known);
+  EXPECT_TRUE(bound.upper_bound);
+  // Both settlings (1.5 s each at quick) and the collapse, each to its limit: 4 s of
+  // simulated time against 6 s.
+  EXPECT_NEAR(bound.hi / bound.lo, 6.0 / 4.0, 1e-3);
+  const std::string said = jobs::describe(bound, 2);
+  EXPECT_NE(said.find("at most"), std::string::npos) << said;
+  EXPECT_EQ(said.find("about"), std::string::npos) << said;
+  EXPECT_NE(said.find("comes to rest sooner costs less"), std::string::npos) << said;
+
+  // A done task that cost a quarter of its bound: the forecast is an estimate now.
+  const double yard = jobs::forecast_work(scene, {params[0]}).core_seconds;
+  const jobs::MeasuredSpeed m = jobs::measure_speed(scene, {{params[0], 0.25 * yard}});
+  ASSERT_EQ(m.tasks, 1);
+  const jobs::WorkForecast measured = jobs::forecast_work(scene, params, m);
+  EXPECT_FALSE(measured.upper_bound);
+  EXPECT_NEAR(measured.core_seconds, 0.25 * bound.core_seconds, 1e-9 * bound.core_seconds);
+  const std::string now = jobs::describe(measured);
+  EXPECT_EQ(now.find("at most"), std::string::npos) << now;
+  EXPECT_EQ(now.find("sooner"), std::string::npos) << now;
+}
+
+TEST(Progress, ABoundIsDrawnAsOne) {
+  std::ostringstream out;
+  jobs::Progress bar(out, /*terminal=*/true);
+  bar.update({4, 1, 0, 1}, jobs::Eta{90.0, true});
+  EXPECT_NE(out.str().find("ETA <= 1:30"), std::string::npos) << out.str();
+  bar.line("task 2 done", {4, 2, 0, 1});  // redrawn with the ETA it was last given
+  EXPECT_NE(out.str().rfind("ETA <= 1:30"), out.str().find("ETA <= 1:30")) << out.str();
+  std::ostringstream plain;
+  jobs::Progress estimate(plain, true);
+  estimate.update({4, 1, 0, 1}, jobs::Eta{90.0, false});
+  EXPECT_NE(plain.str().find("ETA 1:30"), std::string::npos) << plain.str();
+  std::ostringstream unknown;
+  jobs::Progress none(unknown, true);
+  none.update({4, 0, 0, 1}, jobs::Eta{-1, true});  // nothing known: no bound to speak of
+  EXPECT_NE(unknown.str().find("ETA --:--"), std::string::npos) << unknown.str();
 }
