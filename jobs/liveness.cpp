@@ -69,28 +69,62 @@ std::string runner_token() {
   return host() + ":" + std::to_string(getpid()) + ":" + start;
 }
 
-bool holder_alive(db::Store& store, const std::string& token) {
+bool BeatWatch::alive(const std::string& token, std::optional<double> last_seen, double unix_now, double watch_s) {
+  if (!last_seen) return true;
+  const auto it = seen_.find(token);
+  if (it == seen_.end()) {
+    seen_[token] = Seen{*last_seen, watch_s, std::nullopt};
+  } else if (it->second.stamp != *last_seen) {
+    it->second = Seen{*last_seen, watch_s, unix_now - *last_seen};
+  }
+  const double unchanged_for = watch_s - seen_[token].since;
+  if (unchanged_for >= kRunnerLeaseS) return false;
+  if (unix_now - *last_seen < kRunnerLeaseS) return true;
+  return unchanged_for < kRunnerConfirmS;
+}
+
+std::optional<double> BeatWatch::clock_behind(const std::string& token) const {
+  const auto it = seen_.find(token);
+  if (it == seen_.end() || !it->second.behind || *it->second.behind < 2 * kRunnerBeatS) return std::nullopt;
+  return it->second.behind;
+}
+
+namespace {
+double watch_clock_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+std::string seconds(double s) { return std::to_string(static_cast<long>(std::lround(s))) + " s"; }
+}  // namespace
+
+bool holder_alive(db::Store& store, const std::string& token, BeatWatch* watch) {
   const auto t = parse_token(token);
   if (!t) return false;
   if (t->host == host()) return token == runner_token() || process_alive(*t);
   const auto seen = store.last_seen(token);
+  if (watch) return watch->alive(token, seen, db::unix_now(), watch_clock_s());
   return !seen || db::unix_now() - *seen < kRunnerLeaseS;
 }
 
-int requeue_dead_runners(db::Store& store) {
-  return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w); });
+int requeue_dead_runners(db::Store& store, BeatWatch* watch) {
+  return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w, watch); });
 }
 
-std::string describe_holder(db::Store& store, const std::string& token) {
+std::string describe_holder(db::Store& store, const std::string& token, const BeatWatch* watch) {
   const auto t = parse_token(token);
   if (t && t->host == host()) return token + " (this host)";
   const auto seen = store.last_seen(token);
   if (!seen)
     return token + " (another host, no heartbeat: a demcal from before heartbeats; if it is gone, `demcal run JOB "
                    "--requeue-running` puts its tasks back)";
+  if (const auto behind = watch ? watch->clock_behind(token) : std::nullopt)
+    return token + " (another host, beating, with its clock about " + seconds(*behind) +
+           " behind this host's; its tasks are re-queued once it is silent for " + seconds(kRunnerLeaseS) + ")";
   const double ago = db::unix_now() - *seen;
-  return token + " (another host, last seen " + std::to_string(static_cast<long>(std::lround(ago))) +
-         " s ago; its tasks are re-queued once it is silent for " + std::to_string(static_cast<long>(kRunnerLeaseS)) + " s)";
+  if (watch && ago >= kRunnerLeaseS)
+    return token + " (another host, last seen " + seconds(ago) + " ago by its own clock; its tasks are re-queued unless a "
+                   "beat arrives within " + seconds(kRunnerConfirmS) + ": a host's clock may run behind this one's)";
+  return token + " (another host, last seen " + seconds(ago) + " ago; its tasks are re-queued once it is silent for " +
+         seconds(kRunnerLeaseS) + ")";
 }
 
 Heartbeat::Heartbeat(db::Store& store, std::string token) : store_(store), token_(std::move(token)) {

@@ -45,8 +45,9 @@ void Progress::draw(const Counts& c) {
   std::string bar(static_cast<std::size_t>(filled), '#');
   bar.resize(static_cast<std::size_t>(width), ' ');
   err_ << "\r\033[K[" << bar << "] " << c.done << " done, " << c.failed << " failed, " << c.running << " running, "
-       << (c.total - c.done - c.failed - c.running) << " queued  ETA " << (eta_.at_most && eta_.s >= 0 ? "<= " : "")
-       << format_duration(eta_.s);
+       << (c.total - c.done - c.failed - c.running) << " queued  ETA "
+       << (eta_.past_forecast ? std::string("past forecast")
+                              : (eta_.at_most && eta_.s >= 0 ? "<= " : "") + format_duration(eta_.s));
   bar_shown_ = true;
 }
 

@@ -12,10 +12,12 @@ struct Counts {
   int total = 0, done = 0, failed = 0, running = 0;
 };
 
-// Seconds left (< 0: unknown); at_most: a bound (every task to its time limit), drawn "<=".
+// Seconds left (< 0: unknown); at_most: a bound (every task to its time limit), drawn
+// "<="; past_forecast: the tasks still running have all run longer than forecast.
 struct Eta {
   double s = -1;
   bool at_most = false;
+  bool past_forecast = false;
 };
 
 class Progress {

@@ -86,6 +86,7 @@ class Runner {
   const SceneDef* scene_ = find_scene(job_.scene);
   std::unordered_map<std::int64_t, double> yardstick_s_;  // task id -> its forecast core-seconds at factor 1
   MeasuredSpeed speed_;
+  BeatWatch beats_;  // other hosts' heartbeats, watched on this process's clock
   bool work_is_bound_ = false;  // the scene forecasts every stage to its limit (until measured)
   Counts counts_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
@@ -100,7 +101,7 @@ void Runner::prepare() {
               << " = " << opt_.shard.index - 1 << "\n";
   if (opt_.requeue_running)
     if (int n = store_.requeue_running(job_id)) *opt_.log << "re-queued " << n << " running task(s) (--requeue-running)\n";
-  if (int n = requeue_dead_runners(store_))
+  if (int n = requeue_dead_runners(store_, &beats_))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (opt_.retry_failed)
     if (int n = store_.reset_failed(job_id)) *opt_.log << "retrying " << n << " failed task(s)\n";
@@ -163,11 +164,11 @@ void Runner::refill_queue() {
 }
 
 void Runner::say_holders(std::string& said) {
-  std::string text, key;  // the key: holders and counts, not the seconds since they beat
+  std::string text, key;  // the key: holders, counts and a clock lag found, not the seconds since they beat
   for (const auto& [w, n] : store_.running_holders(job_.name))
     if (w != token_) {
-      text += "  " + std::to_string(n) + " held by " + describe_holder(store_, w) + "\n";
-      key += w + "=" + std::to_string(n) + ";";
+      text += "  " + std::to_string(n) + " held by " + describe_holder(store_, w, &beats_) + "\n";
+      key += w + "=" + std::to_string(n) + (beats_.clock_behind(w) ? "~" : "") + ";";
     }
   if (text.empty() || key == said) return;
   said = key;
@@ -259,6 +260,8 @@ void Runner::measure_speed_now() {
 Eta Runner::eta() {
   if (!yardstick_s_.empty()) {
     const double s = forecast_eta();
+    // Nothing left by the forecast, yet tasks run: "0.0 s" would stand still on the bar.
+    if (s == 0 && !running_.empty()) return Eta{-1, false, true};
     if (s >= 0) return Eta{s, work_is_bound_ && speed_.tasks == 0};
   }
   if (ran_ == 0) return Eta{};
@@ -340,7 +343,8 @@ RunSummary Runner::run() {
     heartbeat.tick();
     if (idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
       last_refresh = now;
-      requeue_dead_runners(store_);
+      if (int n = requeue_dead_runners(store_, &beats_))
+        progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", counts());
       refill_queue();
       const Counts c = counts();
       if (queue_.empty() && running_.empty() && (c.running == 0 || superseded_)) break;  // all done or failed

@@ -162,9 +162,12 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
 
 std::string describe(const TimeLeft& t) {
   const bool bound = t.forecast.upper_bound;
-  std::string s =
-      std::to_string(t.pending + t.running) + " task(s) to go: " + approx(t.core_seconds, bound) + " of one core";
-  if (t.running > 0)
+  std::string s = std::to_string(t.pending + t.running) + " task(s) to go: ";
+  if (t.pending == 0 && t.core_seconds == 0)
+    s += "the running ones have taken longer than forecast";
+  else
+    s += approx(t.core_seconds, bound) + " of one core";
+  if (t.running > 0 && t.core_seconds > 0)
     s += ", " + approx(t.core_seconds / t.running, bound) + " at the " + std::to_string(t.running) + " running now";
   s += "; at " + speed_source(t.forecast);
   if (!t.forecast.left_out.empty()) s += "; " + t.forecast.left_out;

@@ -55,6 +55,48 @@ TEST(Liveness, ARunnerOnAnotherHostIsJudgedByItsHeartbeat) {
   for (const auto& r : s.tasks("j")) EXPECT_EQ(r.status, "pending");
 }
 
+TEST(Liveness, AWatchTellsAClockBehindOursFromASilentRunner) {
+  BeatWatch w;
+  const double now = 1e9, lag = 600;  // node01's clock runs 10 minutes behind ours
+  // Its beats look 10 minutes old, but a new one arrives every 10 s of our clock.
+  for (int k = 0; k <= 12; ++k)
+    EXPECT_TRUE(w.alive("node01:1:1", now + 10 * k - lag, now + 10 * k, 10.0 * k)) << "beat " << k;
+  ASSERT_TRUE(w.clock_behind("node01:1:1").has_value());
+  EXPECT_NEAR(*w.clock_behind("node01:1:1"), lag, 1e-9);
+  // A runner that stopped beating with the same stale stamp: believed after three beats' time.
+  EXPECT_TRUE(w.alive("node02:1:1", now - lag, now, 0.0));
+  EXPECT_TRUE(w.alive("node02:1:1", now - lag, now + 29, 29.0));
+  EXPECT_FALSE(w.alive("node02:1:1", now - lag, now + 31, 31.0));
+  EXPECT_FALSE(w.clock_behind("node02:1:1").has_value());  // never seen to beat
+  // A clock ahead of ours: its stamp looks fresh for ever; silent for a lease of our clock, dead.
+  const double ahead = now + 3600;
+  EXPECT_TRUE(w.alive("node03:1:1", ahead, now, 0.0));
+  EXPECT_TRUE(w.alive("node03:1:1", ahead, now + kRunnerLeaseS - 1, kRunnerLeaseS - 1));
+  EXPECT_FALSE(w.alive("node03:1:1", ahead, now + kRunnerLeaseS, kRunnerLeaseS));
+  // Never beat (a demcal from before heartbeats): assumed alive, as without a watch.
+  EXPECT_TRUE(w.alive("node04:1:1", std::nullopt, now, 500.0));
+}
+
+TEST(Liveness, ARunnerKeepingAWatchWaitsForAStaleBeatToStayStale) {
+  demcal::test::TempDir d;
+  const std::string path = d.file("a.db");
+  db::Store s(path);
+  s.put_job("j", "{}", three_tasks());
+  const auto rows = s.tasks("j");
+  const std::string silent = "node02:411:77";
+  ASSERT_TRUE(s.claim(rows[0].id, silent));
+  s.beat(silent);
+  age_heartbeat(path, silent, kRunnerLeaseS + 5);
+  BeatWatch w;
+  // First sight of a stale beat: not yet believed (the host's clock may run behind).
+  EXPECT_EQ(requeue_dead_runners(s, &w), 0);
+  EXPECT_EQ(s.task(rows[0].id)->status, "running");
+  EXPECT_NE(describe_holder(s, silent, &w).find("re-queued unless a beat arrives within 30 s"), std::string::npos)
+      << describe_holder(s, silent, &w);
+  // Without a watch (status, an MPI run's start) the stamp decides at once.
+  EXPECT_EQ(requeue_dead_runners(s), 1);
+}
+
 TEST(Liveness, ARunnerOnThisHostIsJudgedByItsProcess) {
   demcal::test::TempDir d;
   db::Store s(d.file("a.db"));

@@ -119,13 +119,19 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   EXPECT_NE(said.find(" at the 1 running now; at the speed of the last 1 done triaxial task(s)"), std::string::npos)
       << said;
 
-  // Everything done: nothing to say.
-  for (std::size_t k = 1; k < rows.size(); ++k) {
-    if (k > 1) {
-      ASSERT_TRUE(store.claim(rows[k].id, "w"));
-    }
+  // The pending ones done, the running one long past its forecast: said so, not "under a minute".
+  for (std::size_t k = 2; k < rows.size(); ++k) {
+    ASSERT_TRUE(store.claim(rows[k].id, "w"));
     ASSERT_TRUE(store.finish(rows[k].id, "w", out));
   }
+  t = jobs::time_left(store, job.name, started + 1e6);
+  ASSERT_TRUE(t.known);
+  EXPECT_EQ(t.core_seconds, 0.0);
+  EXPECT_EQ(jobs::describe(t).rfind("1 task(s) to go: the running ones have taken longer than forecast; at", 0), 0u)
+      << jobs::describe(t);
+
+  // Everything done: nothing to say.
+  ASSERT_TRUE(store.finish(rows[1].id, "w", out));
   EXPECT_FALSE(jobs::time_left(store, job.name, db::unix_now()).known);
 }
 
@@ -175,4 +181,8 @@ TEST(Progress, ABoundIsDrawnAsOne) {
   jobs::Progress none(unknown, true);
   none.update({4, 0, 0, 1}, jobs::Eta{-1, true});  // nothing known: no bound to speak of
   EXPECT_NE(unknown.str().find("ETA --:--"), std::string::npos) << unknown.str();
+  std::ostringstream late;
+  jobs::Progress overdue(late, true);
+  overdue.update({4, 3, 0, 1}, jobs::Eta{-1, false, true});
+  EXPECT_NE(late.str().find("ETA past forecast"), std::string::npos) << late.str();
 }
