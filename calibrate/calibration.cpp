@@ -2,6 +2,7 @@
 
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/material_params.hpp"
 #include "jobs/runner.hpp"
 
 #include <algorithm>
@@ -139,6 +140,42 @@ std::string job_for_metric(db::Store& store, const std::string& metric, const st
   return have.front();
 }
 
+std::string material_mismatch(db::Store& store, const std::vector<std::string>& job_names) {
+  if (job_names.size() < 2) return "";
+  std::map<std::string, std::map<std::string, std::set<std::string>>> values;  // key -> job -> values
+  for (const auto& job : job_names)
+    for (const auto& t : store.tasks(job)) {
+      nlohmann::json p;
+      try {
+        p = nlohmann::json::parse(t.params_json);
+      } catch (const std::exception&) {
+        continue;
+      }
+      for (const auto& spec : jobs::material_params()) {
+        if (spec.name == "theta_deg" || spec.name == "eta") continue;
+        values[spec.name][job].insert(p.contains(spec.name) ? p[spec.name].dump() : std::string("(default)"));
+      }
+    }
+  std::vector<std::string> differ;
+  for (const auto& [key, per_job] : values) {
+    std::set<std::set<std::string>> distinct;
+    for (const auto& [job, v] : per_job) distinct.insert(v);
+    if (distinct.size() < 2) continue;
+    std::string d = key + ":";
+    for (const auto& [job, v] : per_job) {
+      std::string shown;
+      for (const auto& x : v) shown += (shown.empty() ? "" : "|") + (x.size() > 40 ? x.substr(0, 37) + "..." : x);
+      d += " " + shown + " (" + job + ")";
+    }
+    differ.push_back(d);
+  }
+  if (differ.empty()) return "";
+  std::string all;
+  for (const auto& d : differ) all += (all.empty() ? "" : "; ") + d;
+  return "the jobs fitted together do not share one material (" + all +
+         "): the fit takes their metrics as one material's; rerun one job with the other's material section";
+}
+
 Calibration calibrate(db::Store& store, const FitRequest& req) {
   if (req.targets.empty()) throw JobError("--target", "give at least one target, e.g. --target phi_peak=41.4");
   std::set<std::string> seen;
@@ -196,6 +233,12 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
         correlations.push_back({k, l, replica_correlation(cal.surfaces[k], cal.surfaces[l])});
   cal.result = invert(cal.models, req.targets, box, req.options, correlations);
   for (const auto& c : data_cuts) cal.result.warnings.push_back(c);
+  {
+    std::set<std::string> used;
+    for (const auto& m : cal.models) used.insert(m.job);
+    if (const std::string w = material_mismatch(store, {used.begin(), used.end()}); !w.empty())
+      cal.result.warnings.push_back(w);
+  }
   if (cal.result.ok) {
     // One warning per set of gaps: metrics of one job share their failed tasks.
     std::vector<std::pair<std::string, std::string>> gaps;  // gaps, metrics

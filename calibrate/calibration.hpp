@@ -34,6 +34,9 @@ std::string job_for_metric(db::Store& store, const std::string& metric, const st
 
 // Throws JobError for bad input (unknown metric, no data, grids that do not overlap).
 Calibration calibrate(db::Store& store, const FitRequest& request);
+// A fit across jobs assumes one material: the material parameters other than theta
+// and eta that the jobs' tasks do not share, as a warning ("" when they share all).
+std::string material_mismatch(db::Store& store, const std::vector<std::string>& jobs);
 
 // What a stored fit holds: the targets, the method and the result (with the jobs,
 // surrogates, round and pinned parameters).

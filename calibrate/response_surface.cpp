@@ -216,7 +216,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     if (th.size() < 2 || et.size() < 2)
       throw JobError("--job", "job \"" + job + "\" has " + std::to_string(th.size()) + " theta_deg and " +
                                   std::to_string(et.size()) +
-                                  " eta value(s); maps and fits need a grid over at least 2 of each");
+                                  " eta value(s); maps need a grid over at least 2 of each, fits 3");
   }
 
   // Only replicas may be averaged: any other parameter that varies must be pinned.

@@ -6,25 +6,40 @@
 #include "jobs/work_forecast.hpp"
 
 #include <iostream>
+#include <unordered_set>
 #include <vector>
 
 namespace demcal::cli {
 namespace {
 
-// At the speed of the database's done tasks of the scene when --db names one.
+// At the speed of the database's done tasks of the scene when --db names one, and of
+// the tasks a run would not reuse from it.
 void print_work(const jobs::Job& job, const std::string& db) {
   const jobs::SceneDef* scene = jobs::find_scene(job.scene);
   if (!scene || !scene->work) return;
   std::vector<nlohmann::json> params;
-  for (const auto& t : job.tasks) params.push_back(t.params);
   jobs::MeasuredSpeed speed;
-  int done_untimed = 0;
+  int done_untimed = 0, reused = 0;
   if (!db.empty()) {
     db::Store store(db, /*read_only=*/true);
-    speed = jobs::measure_speed(store, *scene);
-    if (speed.tasks == 0)
-      for (const auto& t : store.tasks()) done_untimed += t.scene == job.scene && t.status == "done";
+    speed = jobs::measure_speed(store, *scene, job.threads > 0 ? job.threads : 1);
+    std::unordered_set<std::string> done_keys;
+    for (const auto& t : store.tasks()) {
+      if (t.status == "done") done_keys.insert(t.key);
+      if (speed.tasks == 0) done_untimed += t.scene == job.scene && t.status == "done";
+    }
+    for (const auto& t : job.tasks)
+      if (done_keys.count(t.key)) ++reused;
+      else params.push_back(t.params);
+  } else {
+    for (const auto& t : job.tasks) params.push_back(t.params);
   }
+  if (reused > 0)
+    std::cout << "work: " << reused << " of the " << job.tasks.size() << " task(s) are done in " << db
+              << " already (demcal run reuses them)"
+              << (params.empty() ? std::string(": nothing to run") : "; the other " + std::to_string(params.size()) + " below")
+              << "\n";
+  if (params.empty()) return;
   std::cout << "work: " << jobs::describe(jobs::forecast_work(*scene, params, speed)) << "\n";
   if (!db.empty() && speed.tasks == 0)
     std::cout << "work: " << db

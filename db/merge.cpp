@@ -336,7 +336,8 @@ static MergeReport merge_into(const std::string& into, const std::vector<std::st
 }
 
 bool is_timing_metric(const std::string& name) {
-  return name == "wall_s" || name.rfind("wall_s_", 0) == 0 || name == "cpu_s" || name == "particle_steps_per_s";
+  return name == "wall_s" || name.rfind("wall_s_", 0) == 0 || name == "cpu_s" || name == "particle_steps_per_s" ||
+         name == "threads";
 }
 
 MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts) {

@@ -12,9 +12,9 @@
 //   keeps its result;
 // - jobs join by name and their task lists (job_tasks) are united; a job whose
 //   spec differs from the destination's job of that name stops the merge.
-// Timing metrics (is_timing_metric: wall-clock time, throughput) measure the
-// machine, not the physics; they differ between two runs of the same task and are
-// left out of the comparison.
+// Timing metrics (is_timing_metric: wall-clock and CPU time, throughput, the thread
+// count it ran on) measure the machine, not the physics; they differ between two runs
+// of the same task and are left out of the comparison.
 // Fits are copied unless an identical row is there. Every part is checked before
 // anything is written (it must exist and be a demcal database of this schema
 // version), and the whole merge is one transaction: on any error nothing is written.

@@ -5,6 +5,7 @@
 #include <sqlite3.h>
 
 #include <chrono>
+#include <cmath>
 #include <set>
 #include <thread>
 
@@ -297,16 +298,23 @@ std::vector<std::pair<std::string, double>> Store::metrics(std::int64_t task_id)
   return out;
 }
 
-std::vector<std::pair<std::string, double>> Store::latest_done_metric(const std::string& scene,
-                                                                     const std::string& metric, int limit) {
-  std::vector<std::pair<std::string, double>> out;
+std::vector<Store::DoneCost> Store::latest_done_costs(const std::string& scene, int limit) {
+  std::vector<DoneCost> out;
   Statement s = conn_.prepare(
-      "SELECT t.params_json, m.value FROM tasks t JOIN metrics m ON m.task_id = t.id AND m.name = ? "
-      "WHERE t.scene = ? AND t.status = 'done' AND m.value IS NOT NULL ORDER BY t.finished_at DESC, t.id DESC LIMIT ?");
-  s.bind(1, metric);
-  s.bind(2, scene);
-  s.bind(3, static_cast<std::int64_t>(limit));
-  while (s.step()) out.emplace_back(s.text(0), s.real(1));
+      "SELECT t.params_json, c.value, t.wall_s, n.value FROM tasks t "
+      "JOIN metrics c ON c.task_id = t.id AND c.name = 'cpu_s' "
+      "LEFT JOIN metrics n ON n.task_id = t.id AND n.name = 'threads' "
+      "WHERE t.scene = ? AND t.status = 'done' AND c.value IS NOT NULL ORDER BY t.finished_at DESC, t.id DESC LIMIT ?");
+  s.bind(1, scene);
+  s.bind(2, static_cast<std::int64_t>(limit));
+  while (s.step()) {
+    DoneCost d;
+    d.params_json = s.text(0);
+    d.cpu_s = s.real(1);
+    d.wall_s = s.real(2);
+    d.threads = s.is_null(3) ? 0 : static_cast<int>(std::lround(s.real(3)));
+    out.push_back(std::move(d));
+  }
   return out;
 }
 

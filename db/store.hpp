@@ -93,10 +93,14 @@ class Store {
   StatusCounts counts(const std::string& job = "");
   std::vector<std::pair<std::string, double>> metrics(std::int64_t task_id);
   std::vector<std::pair<std::string, std::string>> artifacts(std::int64_t task_id);
-  // The parameters and the value of `metric` of the `limit` done tasks of `scene`
-  // that finished last and carry it (what the machine now costs per task).
-  std::vector<std::pair<std::string, double>> latest_done_metric(const std::string& scene, const std::string& metric,
-                                                                 int limit);
+  // What the `limit` done tasks of `scene` that finished last and carry a CPU time
+  // cost (what the machine now costs per task).
+  struct DoneCost {
+    std::string params_json;
+    double cpu_s = 0, wall_s = 0;  // metric cpu_s; the task's wall time (NaN: none)
+    int threads = 0;               // metric threads; 0: not recorded (an older demcal)
+  };
+  std::vector<DoneCost> latest_done_costs(const std::string& scene, int limit);
 
   // The spec_json recorded for a job, if the job exists.
   std::optional<std::string> job_spec(const std::string& name);

@@ -47,7 +47,8 @@ void Progress::draw(const Counts& c) {
   err_ << "\r\033[K[" << bar << "] " << c.done << " done, " << c.failed << " failed, " << c.running << " running, "
        << (c.total - c.done - c.failed - c.running) << " queued  ETA "
        << (eta_.past_forecast ? std::string("past forecast")
-                              : (eta_.at_most && eta_.s >= 0 ? "<= " : "") + format_duration(eta_.s));
+                              : (eta_.at_most && eta_.s >= 0 ? "<= " : "") + format_duration(eta_.s))
+       << (eta_.bound_s >= 0 && !eta_.at_most ? " (<= " + format_duration(eta_.bound_s) + ")" : "");
   bar_shown_ = true;
 }
 

@@ -13,11 +13,13 @@ struct Counts {
 };
 
 // Seconds left (< 0: unknown); at_most: a bound (every task to its time limit), drawn
-// "<="; past_forecast: the tasks still running have all run longer than forecast.
+// "<="; past_forecast: the tasks still running have all run longer than forecast;
+// bound_s (>= 0): a bound drawn beside an estimate.
 struct Eta {
   double s = -1;
   bool at_most = false;
   bool past_forecast = false;
+  double bound_s = -1;
 };
 
 class Progress {

@@ -70,7 +70,7 @@ class Runner {
   // speed measured in the database (re-measured as tasks finish); without a forecast,
   // the mean of the tasks this run finished. A bound while the forecast is one.
   Eta eta();
-  double forecast_eta() const;
+  double forecast_eta(bool bound) const;  // bound: every task to its limit, at the yardstick
   void measure_speed_now();
 
   db::Store& store_;
@@ -138,7 +138,7 @@ void Runner::prepare() {
     if (scene_ && scene_->work) {
       std::vector<nlohmann::json> params;
       for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
-      speed_ = measure_speed(store_, *scene_);
+      speed_ = measure_speed(store_, *scene_, threads_);
       const WorkForecast w = forecast_work(*scene_, params, speed_);
       for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor;
       work_is_bound_ = w.upper_bound;
@@ -229,40 +229,46 @@ Counts Runner::counts() {
   return c;
 }
 
-double Runner::forecast_eta() const {
-  const double factor = speed_.tasks > 0 ? speed_.factor : 1.0;
+double Runner::forecast_eta(bool bound) const {
+  // Each task's wall time: at the wall-time speed of done tasks that ran on as many
+  // threads as this run gives its own (the machine's load and the threads' overlap
+  // are in it); else its CPU forecast spread over the threads.
+  const bool measured = speed_.tasks > 0 && !bound;
+  const bool wall_measured = measured && speed_.wall_factor > 0 && speed_.threads == threads_;
+  const double per_yardstick = wall_measured ? speed_.wall_factor : (measured ? speed_.factor : 1.0) / threads_;
   const auto now = std::chrono::steady_clock::now();
-  std::vector<double> queued;
-  std::vector<std::pair<double, double>> running;
+  std::vector<double> queued, free_at;  // wall seconds of each queued task; when each worker is free
   for (const auto& t : queue_) {
     const auto it = yardstick_s_.find(t.id);
     if (it == yardstick_s_.end()) return -1;  // a task queued since (re-queued): no forecast for it
-    queued.push_back(it->second * factor);
+    queued.push_back(it->second * per_yardstick);
   }
   for (const auto& r : running_) {
     const auto it = yardstick_s_.find(r.task_id);
     if (it == yardstick_s_.end()) return -1;
-    running.emplace_back(it->second * factor, std::chrono::duration<double>(now - r.start).count());
+    free_at.push_back(std::max(0.0, it->second * per_yardstick - std::chrono::duration<double>(now - r.start).count()));
   }
-  const int left = static_cast<int>(queue_.size() + running_.size());
-  return cpu_seconds_left(queued, running, threads_) / (std::max(1, std::min(workers_, left)) * threads_);
+  return makespan(queued, free_at, workers_);
 }
 
 // After a task finishes: its CPU time is in the database now.
 void Runner::measure_speed_now() {
   if (yardstick_s_.empty()) return;
   try {
-    speed_ = measure_speed(store_, *scene_);
+    speed_ = measure_speed(store_, *scene_, threads_);
   } catch (const std::exception&) {  // a forecast only
   }
 }
 
 Eta Runner::eta() {
   if (!yardstick_s_.empty()) {
-    const double s = forecast_eta();
+    const double s = forecast_eta(false);
+    // A scene whose forecast is a bound keeps it in sight once measured: the tasks
+    // measured first are the ones that ended soonest.
+    const double bound = work_is_bound_ && speed_.tasks > 0 ? forecast_eta(true) : -1;
     // Nothing left by the forecast, yet tasks run: "0.0 s" would stand still on the bar.
-    if (s == 0 && !running_.empty()) return Eta{-1, false, true};
-    if (s >= 0) return Eta{s, work_is_bound_ && speed_.tasks == 0};
+    if (s == 0 && !running_.empty()) return Eta{-1, false, true, bound};
+    if (s >= 0) return Eta{s, work_is_bound_ && speed_.tasks == 0, false, bound};
   }
   if (ran_ == 0) return Eta{};
   const double per_task = busy_s_ / ran_;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <queue>
+#include <set>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -11,46 +13,61 @@ namespace {
 double yardstick_seconds(const Work& w) { return w.steps * w.grains * w.ns_per_grain_step * 1e-9; }
 }  // namespace
 
-MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<std::pair<nlohmann::json, double>>& cpu_s_of_done) {
+namespace {
+// The median of (value, weight) pairs weighted by weight: a task slowed by a busy
+// machine moves it little, and small tasks, whose set-up the forecast does not count,
+// weigh as little as they cost.
+double weighted_median(std::vector<std::pair<double, double>> value_weight) {
+  std::sort(value_weight.begin(), value_weight.end());
+  double total = 0, below = 0;
+  for (const auto& vw : value_weight) total += vw.second;
+  for (const auto& [value, weight] : value_weight)
+    if ((below += weight) >= 0.5 * total) return value;
+  return value_weight.back().first;
+}
+}  // namespace
+
+MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<DoneTask>& done, int threads) {
   MeasuredSpeed m;
+  m.wanted_threads = threads;
   if (!scene.work) return m;
-  std::vector<std::pair<double, double>> ratio_weight;  // CPU over yardstick, the yardstick
-  double total = 0;
-  for (const auto& [params, cpu_s] : cpu_s_of_done) {
+  const bool any_matched =
+      std::any_of(done.begin(), done.end(), [&](const DoneTask& d) { return d.threads == threads; });
+  std::vector<std::pair<double, double>> cpu, wall;  // over the yardstick, the yardstick
+  std::set<int> ran_with;
+  for (const DoneTask& d : done) {
+    if (any_matched && d.threads != threads) continue;
     double forecast = NAN;
     try {
-      forecast = yardstick_seconds(scene.work(params));
+      forecast = yardstick_seconds(scene.work(d.params));
     } catch (const std::exception&) {
       continue;  // parameters this build cannot read (an older or damaged row)
     }
-    if (!(std::isfinite(cpu_s) && cpu_s > 0 && std::isfinite(forecast) && forecast > 0)) continue;
-    ratio_weight.emplace_back(cpu_s / forecast, forecast);
-    total += forecast;
+    if (!(std::isfinite(d.cpu_s) && d.cpu_s > 0 && std::isfinite(forecast) && forecast > 0)) continue;
+    cpu.emplace_back(d.cpu_s / forecast, forecast);
+    if (std::isfinite(d.wall_s) && d.wall_s > 0) wall.emplace_back(d.wall_s / forecast, forecast);
+    ran_with.insert(d.threads);
   }
-  if (ratio_weight.empty()) return m;
-  // The median weighted by work: a task slowed by a busy machine moves it little, and
-  // small tasks, whose set-up the forecast does not count, weigh as little as they cost.
-  std::sort(ratio_weight.begin(), ratio_weight.end());
-  double below = 0;
-  for (const auto& [ratio, weight] : ratio_weight) {
-    m.factor = ratio;
-    if ((below += weight) >= 0.5 * total) break;
-  }
-  m.tasks = static_cast<int>(ratio_weight.size());
+  if (cpu.empty()) return m;
+  m.tasks = static_cast<int>(cpu.size());
+  m.factor = weighted_median(cpu);
+  // Wall times only when every measured task has one: a mixed set would weigh the rest.
+  if (wall.size() == cpu.size()) m.wall_factor = weighted_median(wall);
+  m.threads = ran_with.size() == 1 ? *ran_with.begin() : 0;
   return m;
 }
 
-MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene) {
+MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene, int threads) {
   if (!scene.work) return {};
   constexpr int kLatest = 50;
-  std::vector<std::pair<nlohmann::json, double>> done;
-  for (const auto& [params_json, cpu_s] : store.latest_done_metric(scene.name, "cpu_s", kLatest)) {
+  std::vector<DoneTask> done;
+  for (const auto& c : store.latest_done_costs(scene.name, kLatest)) {
     try {
-      done.emplace_back(nlohmann::json::parse(params_json), cpu_s);
+      done.push_back(DoneTask{nlohmann::json::parse(c.params_json), c.cpu_s, c.wall_s, c.threads});
     } catch (const std::exception&) {
     }
   }
-  return measure_speed(scene, done);
+  return measure_speed(scene, done, threads);
 }
 
 WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params,
@@ -62,6 +79,8 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
   f.of = scene.work_of;
   f.measured_on = speed.tasks;
   f.factor = speed.tasks > 0 ? speed.factor : 1.0;
+  f.measured_threads = speed.threads;
+  f.wanted_threads = speed.wanted_threads;
   // Measured CPU time holds the preparation as the done tasks had it.
   if (speed.tasks == 0) f.left_out = scene.work_left_out;
   f.lo = INFINITY;
@@ -101,9 +120,12 @@ std::string speed_source(const WorkForecast& w) {
   if (w.measured_on == 0) return "the speed docs/performance.md measures on this project's machine";
   std::ostringstream os;
   os << std::fixed << std::setprecision(2) << w.factor;
-  return "the speed of the last " + std::to_string(w.measured_on) + " done " + w.scene +
-         " task(s) in this database (their CPU time, preparation included: " + os.str() +
-         "x the yardstick of docs/performance.md)";
+  std::string ran;
+  if (w.measured_threads != w.wanted_threads)
+    ran = w.measured_threads > 0 ? ", run with " + std::to_string(w.measured_threads) + " threads"
+                                 : ", run with differing thread counts";
+  return "the speed of the last " + std::to_string(w.measured_on) + " done " + w.scene + " task(s) in this database" +
+         ran + " (their CPU time, preparation included: " + os.str() + "x the yardstick of docs/performance.md)";
 }
 }  // namespace
 
@@ -126,6 +148,22 @@ double cpu_seconds_left(const std::vector<double>& queued, const std::vector<std
   return left;
 }
 
+double makespan(const std::vector<double>& queued, const std::vector<double>& running_left, int workers) {
+  std::priority_queue<double, std::vector<double>, std::greater<>> free_at(running_left.begin(), running_left.end());
+  for (int k = static_cast<int>(running_left.size()); k < workers; ++k) free_at.push(0.0);
+  double end = 0;
+  for (const double t : queued) {
+    const double start = free_at.top();
+    free_at.pop();
+    free_at.push(start + t);
+  }
+  while (!free_at.empty()) {
+    end = std::max(end, free_at.top());
+    free_at.pop();
+  }
+  return end;
+}
+
 TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) {
   TimeLeft t;
   std::vector<db::TaskRow> rows;
@@ -135,6 +173,7 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
   const SceneDef* scene = find_scene(rows.front().scene);
   if (!scene || !scene->work) return t;
   const MeasuredSpeed speed = measure_speed(store, *scene);
+  const double cpu_per_wall = speed.wall_factor > 0 ? std::min(1.0, speed.factor / speed.wall_factor) : 1.0;
   try {
     std::vector<nlohmann::json> all;
     for (const auto& r : rows) all.push_back(nlohmann::json::parse(r.params_json));
@@ -146,10 +185,11 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
   std::vector<std::pair<double, double>> running;
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const double c = t.forecast.task_core_seconds[k];
-    // A running task has used its wall time so far: one thread's worth, a guess for
-    // a task that runs several (the database does not say how many).
+    // A running task has used its wall time so far, at the CPU-to-wall ratio of the
+    // done tasks (a busy machine gives a task less than its wall time); one thread's
+    // worth, a guess for a task that runs several (the database does not say how many).
     if (rows[k].status == "running")
-      running.emplace_back(c, std::isfinite(rows[k].started_at) ? now_unix_s - rows[k].started_at : 0.0);
+      running.emplace_back(c, (std::isfinite(rows[k].started_at) ? now_unix_s - rows[k].started_at : 0.0) * cpu_per_wall);
     else
       pending.push_back(c);
   }
@@ -164,7 +204,7 @@ std::string describe(const TimeLeft& t) {
   const bool bound = t.forecast.upper_bound;
   std::string s = std::to_string(t.pending + t.running) + " task(s) to go: ";
   if (t.pending == 0 && t.core_seconds == 0)
-    s += "the running ones have taken longer than forecast";
+    s += t.running == 1 ? "the running one has taken longer than forecast" : "the running ones have taken longer than forecast";
   else
     s += approx(t.core_seconds, bound) + " of one core";
   if (t.running > 0 && t.core_seconds > 0)

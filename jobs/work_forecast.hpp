@@ -24,21 +24,32 @@ struct WorkForecast {
   bool upper_bound = false;  // every stage to its limit at the yardstick: a bound, not an estimate
   int measured_on = 0;    // done tasks the speed was measured on (0: the project's yardstick)
   double factor = 1;      // their CPU time over the yardstick's forecast of it
+  int measured_threads = 0, wanted_threads = 1;  // as MeasuredSpeed's
   std::string scene;
 };
 
 // Done tasks' cost against the yardstick: the median over them, weighted by their
 // forecast work, of CPU seconds (metric cpu_s, all threads, preparation included)
-// over the forecast's core-seconds.
+// over the forecast's core-seconds, and the same of their wall time.
 struct MeasuredSpeed {
   int tasks = 0;
-  double factor = 1;
+  double factor = 1;       // CPU time over the yardstick
+  double wall_factor = 0;  // wall time over the yardstick (0: no wall times)
+  int threads = 0;         // the thread count the measured tasks ran with (0: mixed or not recorded)
+  int wanted_threads = 1;  // the thread count asked for
 };
-// Tasks whose parameters this build cannot read are passed over.
-MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<std::pair<nlohmann::json, double>>& cpu_s_of_done);
+struct DoneTask {
+  nlohmann::json params;
+  double cpu_s = 0, wall_s = 0;
+  int threads = 0;  // 0: not recorded
+};
+// Tasks run with `threads` threads are measured when there are any (a task on two
+// threads spends CPU time waiting for the other, and more on a busy machine), else
+// all. Tasks whose parameters this build cannot read are passed over.
+MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<DoneTask>& done, int threads = 1);
 // The same over the last 50 done tasks of the scene in a database: the latest tell
 // what the machine does now.
-MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene);
+MeasuredSpeed measure_speed(db::Store& store, const SceneDef& scene, int threads = 1);
 
 WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::json>& task_params,
                            const MeasuredSpeed& speed = {});
@@ -51,6 +62,10 @@ std::string describe(const WorkForecast& w, int workers = 0);
 // (first) has not used in `threads` times its wall time so far (second).
 double cpu_seconds_left(const std::vector<double>& queued, const std::vector<std::pair<double, double>>& running,
                         int threads);
+
+// Wall seconds until `workers` finish the queued tasks (wall seconds each, taken in
+// order by the first worker free) after the running ones (wall seconds each has left).
+double makespan(const std::vector<double>& queued, const std::vector<double>& running_left, int workers);
 
 // What is left of a job in a database: its pending tasks' forecast, and the part of
 // each running task's forecast its time since it started has not used.

@@ -68,6 +68,7 @@ Metrics CollisionResult::metrics() const {
           {"max_relative_error", max_relative_error},
           {"wall_s", wall_seconds},
           {"cpu_s", cpu_seconds},
+          {"threads", static_cast<double>(threads)},
           {"particle_steps_per_s", particle_steps_per_second},
           {"simulated_s", simulated_seconds},
           {"drift_per_simulated_s", drift_per_simulated_second},
@@ -156,6 +157,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   res.steps_done = world.step_count();
   res.wall_seconds = secs;
   res.cpu_seconds = clock.cpu_seconds();
+  res.threads = cfg.threads;
   res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
   res.simulated_seconds = static_cast<double>(res.steps_done) * opt.dt;
   res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;

@@ -47,6 +47,7 @@ struct CollisionResult {
   double max_relative_error = 0;       // max |E - E0| / E0 over the samples
   double wall_seconds = 0;
   double cpu_seconds = 0;  // all threads (RunClock)
+  int threads = 1;
   double particle_steps_per_second = 0;
   double simulated_seconds = 0;        // steps_done * dt
   double drift_per_simulated_second = 0;  // relative, from the same line: drift_per_million_steps / (1e6 dt)

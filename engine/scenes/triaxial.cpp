@@ -155,6 +155,7 @@ Metrics TriaxialResult::metrics() const {
             {"steps", static_cast<double>(steps)},
             {"wall_s", wall_seconds},
             {"cpu_s", cpu_seconds},
+            {"threads", static_cast<double>(threads)},
             {"local_damping_used", local_damping_used ? 1.0 : 0.0},
             {"prep_damping", prep_damping},
             {"shear_damping", shear_damping},

@@ -98,13 +98,15 @@ struct FakePoint {
 inline void store_fake_job(db::Store& store, const std::string& name, const std::vector<double>& ths,
                            const std::vector<double>& ets, int replicas, double noise, std::uint64_t seed,
                            const std::vector<FakePoint>& failed = {}, const std::vector<FakePoint>& pending = {},
-                           double confining_kpa = 100, double rho = 0) {
+                           double confining_kpa = 100, double rho = 0,
+                           const nlohmann::json& extra = nlohmann::json::object()) {
   std::vector<db::NewTask> tasks;
   for (double th : ths)
     for (double et : ets)
       for (int r = 0; r < replicas; ++r) {
         nlohmann::json p = {{"theta_deg", th}, {"eta", et}, {"seed", static_cast<int>(seed) + r}, {"confining_kpa", confining_kpa},
                             {"particles", 500}};
+        p.update(extra);
         tasks.push_back({name + ":" + p.dump(), "triaxial", p.dump()});
       }
   nlohmann::json spec = {{"name", name}, {"scene", "triaxial"}, {"grid", {{"theta_deg", ths}, {"eta", ets}}}, {"replicas", replicas}};

@@ -142,6 +142,21 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   EXPECT_EQ(r.out.find("phi_cv = "), std::string::npos) << r.out;
 }
 
+TEST(Calibrate, JobsFittedTogetherThatDoNotShareAMaterialAreNamed) {
+  TempDir d;
+  db::Store s(d.file("m.db"));
+  const nlohmann::json sand = {{"kn", 3e7}, {"d_min", 0.001}}, soft = {{"kn", 1e7}, {"d_min", 0.001}};
+  store_fake_job(s, "a", {20, 30}, {0.1, 0.2}, 1, 0.0, 1, {}, {}, 100, 0, sand);
+  store_fake_job(s, "b", {20, 30}, {0.1, 0.2}, 1, 0.0, 2, {}, {}, 100, 0, soft);
+  store_fake_job(s, "c", {25, 35}, {0.0, 0.3}, 1, 0.0, 3, {}, {}, 100, 0, sand);  // other grid, same material
+  const std::string w = calibrate::material_mismatch(s, {"a", "b"});
+  EXPECT_NE(w.find("do not share one material (kn: 30000000.0 (a) 10000000.0 (b))"), std::string::npos) << w;
+  EXPECT_EQ(w.find("d_min"), std::string::npos) << w;
+  // theta and eta are the grids' axes, not the material: jobs over other values agree.
+  EXPECT_EQ(calibrate::material_mismatch(s, {"a", "c"}), "");
+  EXPECT_EQ(calibrate::material_mismatch(s, {"a"}), "");
+}
+
 TEST(CalibrateCli, FitCountsTheReplicaCorrelationOfOneJobsMetrics) {
   TempDir d;
   {

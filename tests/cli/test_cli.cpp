@@ -80,6 +80,17 @@ TEST(Cli, ForecastsAtTheSpeedOfTheDatabasesDoneTasks) {
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("at the speed of the last 2 done collision task(s) in this database (their CPU time"),
             std::string::npos) << r.out;
+  // Tasks done in the database already are reused by a run: validate forecasts the rest.
+  r = run_demcal({"validate", "j.json", "--db", "demcal.db"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("work: 2 of the 2 task(s) are done in demcal.db already (demcal run reuses them): nothing to run"),
+            std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("grain-steps"), std::string::npos) << r.out;
+  write(d.file("m.json"), collision_job("mix", {0.05, 0.02, 0.03}));
+  r = run_demcal({"validate", "m.json", "--db", "demcal.db"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("work: 1 of the 3 task(s) are done in demcal.db already (demcal run reuses them); the other 2 below"),
+            std::string::npos) << r.out;
   r = run_demcal({"validate", "k.json", "--db", "missing.db"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--db: no database at missing.db"), std::string::npos) << r.err;

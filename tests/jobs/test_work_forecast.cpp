@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -37,19 +38,37 @@ TEST(WorkForecast, MeasuredSpeedIsTheMedianOfCpuTimeOverTheYardstick) {
   // ran 1.5x, 2x and 10x (a busy machine) their yardstick.
   ASSERT_EQ(job.tasks[0].params["particles"], 300);
   ASSERT_EQ(job.tasks[1].params["particles"], 600);
-  std::vector<std::pair<nlohmann::json, double>> done;
+  std::vector<jobs::DoneTask> done;
   const double ratios[] = {1.5, 2.0, 10.0};
-  for (int k = 0; k < 3; ++k) done.emplace_back(job.tasks[k].params, ratios[k] * yardstick(scene, job.tasks[k].params));
-  done.emplace_back(nlohmann::json{{"particles", "many"}}, 5.0);  // unreadable: passed over
-  done.emplace_back(job.tasks[3].params, 0.0);                    // no time: passed over
+  for (int k = 0; k < 3; ++k) {
+    const double y = yardstick(scene, job.tasks[k].params);
+    done.push_back({job.tasks[k].params, ratios[k] * y, 2 * ratios[k] * y, 1});  // wall: twice the CPU time
+  }
+  done.push_back({nlohmann::json{{"particles", "many"}}, 5.0, 5.0, 1});  // unreadable: passed over
+  done.push_back({job.tasks[3].params, 0.0, 1.0, 1});                    // no time: passed over
   const jobs::MeasuredSpeed m = jobs::measure_speed(scene, done);
   EXPECT_EQ(m.tasks, 3);
   EXPECT_NEAR(m.factor, 2.0, 1e-12);
+  EXPECT_NEAR(m.wall_factor, 4.0, 1e-12);
+  EXPECT_EQ(m.threads, 1);
   // Weighted by work: a 600-grain task at 3x outweighs a 300-grain one at 1x.
   const double w300 = yardstick(scene, job.tasks[0].params), w600 = yardstick(scene, job.tasks[1].params);
   ASSERT_GT(w600, 1.9 * w300);
-  EXPECT_NEAR(jobs::measure_speed(scene, {{job.tasks[0].params, w300}, {job.tasks[1].params, 3 * w600}}).factor, 3.0,
-              1e-12);
+  EXPECT_NEAR(jobs::measure_speed(scene, {{job.tasks[0].params, w300, NAN, 0}, {job.tasks[1].params, 3 * w600, NAN, 0}})
+                  .factor,
+              3.0, 1e-12);
+
+  // A task on two threads spent CPU time waiting for the other (6.8x in a user's
+  // walk-through on a busy machine): a one-thread forecast leaves it out while
+  // one-thread tasks are there, and says so when only it is.
+  std::vector<jobs::DoneTask> mixed = {{job.tasks[0].params, 1.5 * w300, 1.5 * w300, 1},
+                                       {job.tasks[1].params, 6.8 * w600, 3.4 * w600, 2}};
+  EXPECT_NEAR(jobs::measure_speed(scene, mixed).factor, 1.5, 1e-12);
+  EXPECT_NEAR(jobs::measure_speed(scene, mixed, 2).factor, 6.8, 1e-12);
+  const jobs::MeasuredSpeed only_two = jobs::measure_speed(scene, {mixed[1]});
+  EXPECT_EQ(only_two.threads, 2);
+  const std::string said_two = jobs::describe(jobs::forecast_work(scene, {job.tasks[0].params}, only_two));
+  EXPECT_NE(said_two.find("done triaxial task(s) in this database, run with 2 threads"), std::string::npos) << said_two;
 
   std::vector<nlohmann::json> params;
   for (const auto& t : job.tasks) params.push_back(t.params);
@@ -73,6 +92,17 @@ TEST(WorkForecast, CpuSecondsLeftTakeWhatRunningTasksUsedOff) {
   EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({10, 20}, {{30, 4}, {5, 9}, {7, -3}}, 2), 10 + 20 + 22 + 0 + 7);
   EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({}, {{30, 4}}, 1), 26);
   EXPECT_DOUBLE_EQ(jobs::cpu_seconds_left({}, {}, 1), 0);
+}
+
+TEST(WorkForecast, TheLastTaskToFinishSetsTheMakespan) {
+  // Two workers, one running task with 8 s left, one with 1 s: 8 s, not their mean.
+  EXPECT_DOUBLE_EQ(jobs::makespan({}, {8, 1}, 2), 8);
+  // Queued tasks go to the first worker free: 1 + 3 = 4, then 4 + 5 = 9 (the other is busy until 8).
+  EXPECT_DOUBLE_EQ(jobs::makespan({3, 5}, {8, 1}, 2), 9);
+  // An idle worker takes a queued task at once.
+  EXPECT_DOUBLE_EQ(jobs::makespan({2, 2, 2}, {}, 3), 2);
+  EXPECT_DOUBLE_EQ(jobs::makespan({2, 2, 2}, {}, 2), 4);
+  EXPECT_DOUBLE_EQ(jobs::makespan({}, {}, 4), 0);
 }
 
 TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
@@ -127,7 +157,7 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   t = jobs::time_left(store, job.name, started + 1e6);
   ASSERT_TRUE(t.known);
   EXPECT_EQ(t.core_seconds, 0.0);
-  EXPECT_EQ(jobs::describe(t).rfind("1 task(s) to go: the running ones have taken longer than forecast; at", 0), 0u)
+  EXPECT_EQ(jobs::describe(t).rfind("1 task(s) to go: the running one has taken longer than forecast; at", 0), 0u)
       << jobs::describe(t);
 
   // Everything done: nothing to say.
@@ -156,7 +186,7 @@ TEST(WorkForecast, ReposeIsBoundedByItsTimeLimitsUntilDoneTasksSayWhatItCosts) {
 
   // A done task that cost a quarter of its bound: the forecast is an estimate now.
   const double yard = jobs::forecast_work(scene, {params[0]}).core_seconds;
-  const jobs::MeasuredSpeed m = jobs::measure_speed(scene, {{params[0], 0.25 * yard}});
+  const jobs::MeasuredSpeed m = jobs::measure_speed(scene, {{params[0], 0.25 * yard, 0.25 * yard, 1}});
   ASSERT_EQ(m.tasks, 1);
   const jobs::WorkForecast measured = jobs::forecast_work(scene, params, m);
   EXPECT_FALSE(measured.upper_bound);
@@ -185,4 +215,9 @@ TEST(Progress, ABoundIsDrawnAsOne) {
   jobs::Progress overdue(late, true);
   overdue.update({4, 3, 0, 1}, jobs::Eta{-1, false, true});
   EXPECT_NE(late.str().find("ETA past forecast"), std::string::npos) << late.str();
+  // An estimate from the first tasks done, with the bound it came from beside it.
+  std::ostringstream both;
+  jobs::Progress beside(both, true);
+  beside.update({4, 1, 0, 1}, jobs::Eta{12.0, false, false, 100.0});
+  EXPECT_NE(both.str().find("ETA 12.0 s (<= 1:40)"), std::string::npos) << both.str();
 }
