@@ -112,7 +112,7 @@ std::string default_out_dir(const std::string& db_path) {
 
 void require_db(const std::string& db_path) {
   if (!std::filesystem::exists(db_path))
-    throw jobs::JobError("--db", "no database at " + db_path + " (demcal run JOB --db " + db_path + " makes it; --db names another)");
+    throw jobs::JobError("--db", "no database at " + db_path + " (`demcal run JOB --db " + db_path + "` makes one; or give --db the path of an existing one)");
 }
 
 void require_writable_dir(const std::string& flag, const std::string& dir) {

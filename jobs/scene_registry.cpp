@@ -1,5 +1,7 @@
 #include "scene_registry.hpp"
 
+#include "db/merge.hpp"
+
 #include <memory>
 
 namespace demcal::jobs {
@@ -21,6 +23,13 @@ const std::vector<SceneDef>& all_scenes() {
   return scenes;
 }
 }  // namespace
+
+engine::Metrics timing_metrics(const engine::Metrics& all) {
+  engine::Metrics out;
+  for (const auto& kv : all)
+    if (db::is_timing_metric(kv.first)) out.push_back(kv);
+  return out;
+}
 
 const SceneDef* find_scene(const std::string& name) {
   for (const auto& s : all_scenes())

@@ -22,9 +22,12 @@ struct RunContext {
 
 struct SceneOutput {
   engine::SceneOutcome outcome;
-  engine::Metrics metrics;  // empty when the outcome is not ok
+  engine::Metrics metrics;  // when the outcome is not ok, only what the run cost (timing_metrics)
   std::vector<engine::Series> series;
 };
+// Of a failed run's metrics, what it cost (wall and CPU time, threads): a failure's
+// cost is the user's too, and no mechanics of a run that did not finish may pass.
+engine::Metrics timing_metrics(const engine::Metrics& all);
 
 struct Work {
   double steps = 0, grains = 0;

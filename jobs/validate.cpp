@@ -110,6 +110,15 @@ void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out)
       // Grid axes take the flat names that `demcal validate` prints.
       const std::string flat = flat_name_for(scene, k);
       const std::string near = flat.empty() ? closest(k, names) : flat;
+      // A section nested in the grid ("grid": {"repose": {"time_limit": [...]}}).
+      if (v.is_object() && (k == scene.name || k == "material")) {
+        std::string inner;
+        for (const auto& item : v.items())
+          if (!(inner = flat_name_for(scene, k + "." + item.key())).empty()) break;
+        throw JobError(path, "grid axes are not nested in sections: they take the flat names `demcal validate` prints" +
+                                 (inner.empty() ? std::string() : " (\"grid\": {\"" + inner + "\": [...]})") +
+                                 "; a list inside the \"" + k + "\" section itself is a grid axis too");
+      }
       throw JobError(path, "unknown parameter for scene \"" + scene.name + "\"" +
                                (near.empty() ? "" : " (did you mean \"" + near + "\"? grid axes take the flat names "
                                                     "`demcal validate` prints)"));

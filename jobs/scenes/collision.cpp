@@ -87,7 +87,7 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   engine::CollisionResult r = engine::run_collision(c, ctx.observer);
   SceneOutput out;
   out.outcome = r.outcome;
-  if (r.outcome.ok()) out.metrics = r.metrics();
+  out.metrics = r.outcome.ok() ? r.metrics() : timing_metrics(r.metrics());
   out.series.push_back(std::move(r.energy));
   return out;
 }

@@ -207,7 +207,7 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   engine::ReposeResult r = engine::run_repose(c, ctx.observer);
   SceneOutput out;
   out.outcome = r.outcome;
-  if (r.outcome.ok()) out.metrics = r.metrics();
+  out.metrics = r.outcome.ok() ? r.metrics() : timing_metrics(r.metrics());
   for (engine::Series* s : {&r.profile, &r.energy, &r.prep})
     if (!s->name.empty()) out.series.push_back(std::move(*s));
   return out;

@@ -207,6 +207,8 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
     out.metrics.erase(std::remove_if(out.metrics.begin(), out.metrics.end(),
                                      [](const auto& kv) { return std::isnan(kv.second); }),
                       out.metrics.end());
+  } else {
+    out.metrics = timing_metrics(r.metrics());
   }
   out.series.push_back(std::move(r.series));
   return out;

@@ -194,6 +194,16 @@ TEST(Validation, AGridKeyWrittenAsInItsSectionSuggestsItsFlatName) {
   }
 }
 
+TEST(Validation, ASectionNestedInTheGridSaysAxesAreFlat) {
+  json j = json::parse(kBase);
+  j["grid"] = {{"collision", {{"dt_factor", json::array({0.05, 0.1})}}}};
+  const std::string err = error_of(j.dump());
+  EXPECT_NE(err.find("grid.collision: grid axes are not nested in sections"), std::string::npos) << err;
+  EXPECT_NE(err.find("(\"grid\": {\"dt_factor\": [...]})"), std::string::npos) << err;
+  j["grid"] = {{"material", {{"kn", json::array({1e7})}}}};
+  EXPECT_NE(error_of(j.dump()).find("(\"grid\": {\"kn\": [...]})"), std::string::npos) << error_of(j.dump());
+}
+
 TEST(Validation, TypoSuggestsTheKnownKey) {
   json j = json::parse(kBase);
   j["collision"]["partcles"] = 10;

@@ -1,6 +1,7 @@
 // The work forecast at a measured speed: done tasks' CPU time against the yardstick,
 // and what is left of a job in a database.
 #include "../temp_dir.hpp"
+#include "db/merge.hpp"
 #include "db/store.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/progress.hpp"
@@ -9,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -220,4 +222,23 @@ TEST(Progress, ABoundIsDrawnAsOne) {
   jobs::Progress beside(both, true);
   beside.update({4, 1, 0, 1}, jobs::Eta{12.0, false, false, 100.0});
   EXPECT_NE(both.str().find("ETA 12.0 s (<= 1:40)"), std::string::npos) << both.str();
+}
+
+TEST(WorkForecast, AFailedRunKeepsWhatItCostAndNoMechanics) {
+  // Several times the critical step, run on purpose (a stability study): the instability
+  // detector stops it.
+  const jobs::Job job = jobs::parse_job(R"({"name": "boom", "scene": "collision",
+      "collision": {"particles": 200, "steps": 2000, "dt_factor": 8, "allow_unstable_dt": true}})",
+                                        "boom.json");
+  const jobs::SceneDef& scene = *jobs::find_scene("collision");
+  const jobs::SceneOutput out = scene.run(job.tasks[0].params, jobs::RunContext{1, nullptr});
+  ASSERT_FALSE(out.outcome.ok()) << "the run was expected to fail";
+  std::set<std::string> names;
+  for (const auto& [name, value] : out.metrics) {
+    names.insert(name);
+    EXPECT_TRUE(db::is_timing_metric(name)) << name << " of a failed run";
+  }
+  EXPECT_TRUE(names.count("cpu_s")) << "a failure's cost is kept";
+  EXPECT_TRUE(names.count("wall_s"));
+  EXPECT_TRUE(names.count("threads"));
 }
