@@ -102,13 +102,14 @@ std::string sig2(double v) {
   os << std::setprecision(2) << v;
   return os.str();
 }
-// 0.5 minutes, 12 minutes, 3.4 hours: fixed point, never an exponent.
+// 0.5 minutes, 12 minutes, 3.4 hours, 7.3 days: fixed point, never an exponent.
 std::string duration(double seconds) {
   std::ostringstream os;
   const double minutes = seconds / 60.0, hours = minutes / 60.0;
   if (minutes < 10.0) os << std::fixed << std::setprecision(1) << minutes << " minutes";
   else if (minutes < 120.0) os << std::fixed << std::setprecision(0) << minutes << " minutes";
-  else os << std::fixed << std::setprecision(hours < 10.0 ? 1 : 0) << hours << " hours";
+  else if (hours < 48.0) os << std::fixed << std::setprecision(hours < 10.0 ? 1 : 0) << hours << " hours";
+  else os << std::fixed << std::setprecision(hours < 240.0 ? 1 : 0) << hours / 24.0 << " days";
   return os.str();
 }
 std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }

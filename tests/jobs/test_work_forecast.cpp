@@ -242,3 +242,14 @@ TEST(WorkForecast, AFailedRunKeepsWhatItCostAndNoMechanics) {
   EXPECT_TRUE(names.count("wall_s"));
   EXPECT_TRUE(names.count("threads"));
 }
+
+TEST(WorkForecast, LongWorkReadsInDays) {
+  jobs::WorkForecast w;
+  w.known = true;
+  w.of = "the run";
+  w.lo = w.hi = w.grain_steps = 1e12;
+  w.core_seconds = 175 * 3600.0;
+  EXPECT_NE(jobs::describe(w).find("about 7.3 days of one core"), std::string::npos) << jobs::describe(w);
+  w.core_seconds = 30 * 3600.0;
+  EXPECT_NE(jobs::describe(w).find("about 30 hours of one core"), std::string::npos) << jobs::describe(w);
+}
