@@ -153,7 +153,9 @@ std::string material_mismatch(db::Store& store, const std::vector<std::string>& 
       }
       for (const auto& spec : jobs::material_params()) {
         if (spec.name == "theta_deg" || spec.name == "eta") continue;
-        values[spec.name][job].insert(p.contains(spec.name) ? p[spec.name].dump() : std::string("(default)"));
+        // A key the task leaves out takes the default a job file's would: compared as that.
+        const nlohmann::json& v = p.contains(spec.name) ? p[spec.name] : spec.fallback;
+        values[spec.name][job].insert(v.is_null() ? std::string("(default)") : v.dump());
       }
     }
   std::vector<std::string> differ;

@@ -6,7 +6,7 @@
 #include "jobs/work_forecast.hpp"
 
 #include <iostream>
-#include <unordered_set>
+#include <unordered_map>
 #include <vector>
 
 namespace demcal::cli {
@@ -19,26 +19,39 @@ void print_work(const jobs::Job& job, const std::string& db) {
   if (!scene || !scene->work) return;
   std::vector<nlohmann::json> params;
   jobs::MeasuredSpeed speed;
-  int done_untimed = 0, reused = 0;
+  int done_untimed = 0, reused = 0, failed = 0, running = 0;
   if (!db.empty()) {
     db::Store store(db, /*read_only=*/true);
     speed = jobs::measure_speed(store, *scene, job.threads > 0 ? job.threads : 1);
-    std::unordered_set<std::string> done_keys;
+    std::unordered_map<std::string, std::string> status_of;
     for (const auto& t : store.tasks()) {
-      if (t.status == "done") done_keys.insert(t.key);
+      status_of[t.key] = t.status;
       if (speed.tasks == 0) done_untimed += t.scene == job.scene && t.status == "done";
     }
-    for (const auto& t : job.tasks)
-      if (done_keys.count(t.key)) ++reused;
+    // What `demcal run` would not run: done tasks (reused), failed ones (left unless
+    // --retry-failed), running ones (another runner's).
+    for (const auto& t : job.tasks) {
+      const auto it = status_of.find(t.key);
+      const std::string st = it == status_of.end() ? "" : it->second;
+      if (st == "done") ++reused;
+      else if (st == "failed") ++failed;
+      else if (st == "running") ++running;
       else params.push_back(t.params);
+    }
   } else {
     for (const auto& t : job.tasks) params.push_back(t.params);
   }
-  if (reused > 0)
-    std::cout << "work: " << reused << " of the " << job.tasks.size() << " task(s) are done in " << db
-              << " already (demcal run reuses them)"
-              << (params.empty() ? std::string(": nothing to run") : "; the other " + std::to_string(params.size()) + " below")
+  if (reused + failed + running > 0) {
+    std::vector<std::string> parts;
+    if (reused) parts.push_back(std::to_string(reused) + " done (demcal run reuses them)");
+    if (failed) parts.push_back(std::to_string(failed) + " failed (run leaves them unless --retry-failed)");
+    if (running) parts.push_back(std::to_string(running) + " running (another runner holds them)");
+    std::string said;
+    for (const auto& p : parts) said += (said.empty() ? "" : ", ") + p;
+    std::cout << "work: of the " << job.tasks.size() << " task(s), " << db << " holds " << said << "; "
+              << (params.empty() ? std::string("nothing to run") : "the other " + std::to_string(params.size()) + " below")
               << "\n";
+  }
   if (params.empty()) return;
   std::cout << "work: " << jobs::describe(jobs::forecast_work(*scene, params, speed)) << "\n";
   if (!db.empty() && speed.tasks == 0)

@@ -273,10 +273,17 @@ int Store::requeue_running(std::int64_t job_id) {
 }
 
 int Store::reset_failed(std::int64_t job_id) {
+  // A failed run's metrics (what it cost) go with it: a pending task shows none.
+  Transaction t(conn_);
+  conn_.prepare("DELETE FROM metrics WHERE task_id IN (SELECT id FROM tasks WHERE status = 'failed'"
+                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?))")
+      .bind(1, job_id).run();
   conn_.prepare("UPDATE tasks SET status = 'pending' WHERE status = 'failed'"
                 " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
       .bind(1, job_id).run();
-  return conn_.changes();
+  const int n = conn_.changes();
+  t.commit();
+  return n;
 }
 
 StatusCounts Store::counts(const std::string& job) {

@@ -2,6 +2,7 @@
 
 #include "db/store.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <optional>
@@ -120,10 +121,13 @@ std::string describe_holder(db::Store& store, const std::string& token, const Be
     return token + " (another host, beating, with its clock about " + seconds(*behind) +
            " behind this host's; its tasks are re-queued once it is silent for " + seconds(kRunnerLeaseS) + ")";
   const double ago = db::unix_now() - *seen;
+  if (ago < -kRunnerBeatS)
+    return token + " (another host, its last beat stamped " + seconds(-ago) +
+           " ahead of this host's clock; its tasks are re-queued once it is silent for " + seconds(kRunnerLeaseS) + ")";
   if (watch && ago >= kRunnerLeaseS)
     return token + " (another host, last seen " + seconds(ago) + " ago by its own clock; its tasks are re-queued unless a "
                    "beat arrives within " + seconds(kRunnerConfirmS) + ": a host's clock may run behind this one's)";
-  return token + " (another host, last seen " + seconds(ago) + " ago; its tasks are re-queued once it is silent for " +
+  return token + " (another host, last seen " + seconds(std::max(0.0, ago)) + " ago; its tasks are re-queued once it is silent for " +
          seconds(kRunnerLeaseS) + ")";
 }
 

@@ -71,6 +71,7 @@ class Runner {
   // the mean of the tasks this run finished. A bound while the forecast is one.
   Eta eta();
   double forecast_eta(bool bound) const;  // bound: every task to its limit, at the yardstick
+  void forecast_new_tasks();
   void measure_speed_now();
 
   db::Store& store_;
@@ -141,10 +142,26 @@ void Runner::prepare() {
       speed_ = measure_speed(store_, *scene_, threads_);
       const WorkForecast w = forecast_work(*scene_, params, speed_);
       for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor;
-      work_is_bound_ = w.upper_bound;
+      work_is_bound_ = w.bounded_scene;
       *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }
   } catch (const std::exception&) {
+  }
+}
+
+// Tasks queued since the start (re-queued from a runner that is gone) get their
+// forecast too, or the ETA would have none for them.
+void Runner::forecast_new_tasks() {
+  if (yardstick_s_.empty()) return;
+  std::vector<std::int64_t> ids;
+  std::vector<nlohmann::json> params;
+  try {
+    for (const auto& t : queue_)
+      if (!yardstick_s_.count(t.id)) ids.push_back(t.id), params.push_back(nlohmann::json::parse(t.params_json));
+    if (ids.empty()) return;
+    const WorkForecast w = forecast_work(*scene_, params);
+    for (std::size_t k = 0; k < ids.size(); ++k) yardstick_s_[ids[k]] = w.task_core_seconds[k];
+  } catch (const std::exception&) {  // a forecast only
   }
 }
 
@@ -233,9 +250,12 @@ double Runner::forecast_eta(bool bound) const {
   // Each task's wall time: at the wall-time speed of done tasks that ran on as many
   // threads as this run gives its own (the machine's load and the threads' overlap
   // are in it); else its CPU forecast spread over the threads.
+  // The bound: every task to its limits at one thread's yardstick (no credit for the
+  // threads' overlap).
   const bool measured = speed_.tasks > 0 && !bound;
   const bool wall_measured = measured && speed_.wall_factor > 0 && speed_.threads == threads_;
-  const double per_yardstick = wall_measured ? speed_.wall_factor : (measured ? speed_.factor : 1.0) / threads_;
+  const double per_yardstick =
+      bound ? 1.0 : wall_measured ? speed_.wall_factor : (measured ? speed_.factor : 1.0) / threads_;
   const auto now = std::chrono::steady_clock::now();
   std::vector<double> queued, free_at;  // wall seconds of each queued task; when each worker is free
   for (const auto& t : queue_) {
@@ -264,8 +284,10 @@ Eta Runner::eta() {
   if (!yardstick_s_.empty()) {
     const double s = forecast_eta(false);
     // A scene whose forecast is a bound keeps it in sight once measured: the tasks
-    // measured first are the ones that ended soonest.
-    const double bound = work_is_bound_ && speed_.tasks > 0 ? forecast_eta(true) : -1;
+    // measured first are the ones that ended soonest. A bound under the estimate (a
+    // machine slower than the yardstick's) is no bound.
+    double bound = work_is_bound_ && speed_.tasks > 0 ? forecast_eta(true) : -1;
+    if (bound < s) bound = -1;  // a slower machine than the yardstick's: no bound to show
     // Nothing left by the forecast, yet tasks run: "0.0 s" would stand still on the bar.
     if (s == 0 && !running_.empty()) return Eta{-1, false, true, bound};
     if (s >= 0) return Eta{s, work_is_bound_ && speed_.tasks == 0, false, bound};
@@ -331,7 +353,7 @@ RunSummary Runner::run() {
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now();
+  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh;
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
@@ -347,11 +369,21 @@ RunSummary Runner::run() {
     const bool idle = running_.empty() && queue_.empty();
     const auto now = std::chrono::steady_clock::now();
     heartbeat.tick();
-    if (idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
-      last_refresh = now;
-      if (int n = requeue_dead_runners(store_, &beats_))
+    // Other runners are judged on a timer, whatever this run's own queue holds: a dead
+    // one's tasks come back within kRunnerConfirmS of the first look, not when this
+    // run's queue runs dry.
+    bool requeued = false;
+    if (idle || now - last_judged > std::chrono::duration<double>(kRunnerBeatS)) {
+      last_judged = now;
+      if (int n = requeue_dead_runners(store_, &beats_)) {
         progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", counts());
+        requeued = true;
+      }
+    }
+    if (requeued || idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
+      last_refresh = now;
       refill_queue();
+      forecast_new_tasks();
       const Counts c = counts();
       if (queue_.empty() && running_.empty() && (c.running == 0 || superseded_)) break;  // all done or failed
       if (queue_.empty() && running_.empty()) {

@@ -31,12 +31,12 @@ MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<DoneTask>& 
   MeasuredSpeed m;
   m.wanted_threads = threads;
   if (!scene.work) return m;
-  const bool any_matched =
-      std::any_of(done.begin(), done.end(), [&](const DoneTask& d) { return d.threads == threads; });
-  std::vector<std::pair<double, double>> cpu, wall;  // over the yardstick, the yardstick
-  std::set<int> ran_with;
+  struct Usable {
+    double cpu, wall, yardstick;  // CPU and wall time over the yardstick; the yardstick
+    int threads;
+  };
+  std::vector<Usable> usable;
   for (const DoneTask& d : done) {
-    if (any_matched && d.threads != threads) continue;
     double forecast = NAN;
     try {
       forecast = yardstick_seconds(scene.work(d.params));
@@ -44,16 +44,23 @@ MeasuredSpeed measure_speed(const SceneDef& scene, const std::vector<DoneTask>& 
       continue;  // parameters this build cannot read (an older or damaged row)
     }
     if (!(std::isfinite(d.cpu_s) && d.cpu_s > 0 && std::isfinite(forecast) && forecast > 0)) continue;
-    cpu.emplace_back(d.cpu_s / forecast, forecast);
-    if (std::isfinite(d.wall_s) && d.wall_s > 0) wall.emplace_back(d.wall_s / forecast, forecast);
-    ran_with.insert(d.threads);
+    usable.push_back({d.cpu_s / forecast, d.wall_s / forecast, forecast, d.threads});
+  }
+  const bool any_matched = std::any_of(usable.begin(), usable.end(), [&](const Usable& u) { return u.threads == threads; });
+  std::vector<std::pair<double, double>> cpu, wall;  // over the yardstick, the yardstick
+  std::set<int> ran_with;
+  for (const Usable& u : usable) {
+    if (any_matched && u.threads != threads) continue;
+    cpu.emplace_back(u.cpu, u.yardstick);
+    if (std::isfinite(u.wall) && u.wall > 0) wall.emplace_back(u.wall, u.yardstick);
+    ran_with.insert(u.threads);
   }
   if (cpu.empty()) return m;
   m.tasks = static_cast<int>(cpu.size());
   m.factor = weighted_median(cpu);
   // Wall times only when every measured task has one: a mixed set would weigh the rest.
   if (wall.size() == cpu.size()) m.wall_factor = weighted_median(wall);
-  m.threads = ran_with.size() == 1 ? *ran_with.begin() : 0;
+  m.threads = ran_with.size() == 1 ? *ran_with.begin() : MeasuredSpeed::kMixedThreads;
   return m;
 }
 
@@ -88,6 +95,7 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
     const Work w = scene.work(p);
     // Measured CPU time already holds how soon such tasks end.
     f.upper_bound = f.upper_bound || (w.upper_bound && speed.tasks == 0);
+    f.bounded_scene = f.bounded_scene || w.upper_bound;
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
     f.task_core_seconds.push_back(yardstick_seconds(w) * f.factor);
@@ -121,10 +129,11 @@ std::string speed_source(const WorkForecast& w) {
   if (w.measured_on == 0) return "the speed docs/performance.md measures on this project's machine";
   std::ostringstream os;
   os << std::fixed << std::setprecision(2) << w.factor;
-  std::string ran;
-  if (w.measured_threads != w.wanted_threads)
-    ran = w.measured_threads > 0 ? ", run with " + std::to_string(w.measured_threads) + " threads"
-                                 : ", run with differing thread counts";
+  std::string ran;  // nothing for tasks from before the thread count was stored (0)
+  if (w.measured_threads == MeasuredSpeed::kMixedThreads)
+    ran = ", run with differing thread counts";
+  else if (w.measured_threads > 0 && w.measured_threads != w.wanted_threads)
+    ran = ", run with " + std::to_string(w.measured_threads) + " thread(s)";
   return "the speed of the last " + std::to_string(w.measured_on) + " done " + w.scene + " task(s) in this database" +
          ran + " (their CPU time, preparation included: " + os.str() + "x the yardstick of docs/performance.md)";
 }
@@ -134,7 +143,8 @@ std::string describe(const WorkForecast& w, int workers) {
   std::string s = w.of + " is " + sig2(w.lo) + (w.hi > w.lo * 1.005 ? " to " + sig2(w.hi) : std::string()) +
                   " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds, w.upper_bound) +
                   " of one core (" +
-                  (workers > 0 ? approx(w.core_seconds / workers, w.upper_bound) + " on " + std::to_string(workers) + " worker(s)"
+                  (workers > 0 ? approx(makespan(w.task_core_seconds, {}, workers), w.upper_bound) + " on " +
+                                     std::to_string(workers) + " worker(s)"
                                : std::string("divide by --workers")) +
                   ") at " + speed_source(w);
   if (!w.left_out.empty()) s += "; " + w.left_out;

@@ -22,6 +22,7 @@ struct WorkForecast {
   double core_seconds = 0;
   std::vector<double> task_core_seconds;  // each task's, in the order given
   bool upper_bound = false;  // every stage to its limit at the yardstick: a bound, not an estimate
+  bool bounded_scene = false;  // the scene's work is such a bound (measured or not)
   int measured_on = 0;    // done tasks the speed was measured on (0: the project's yardstick)
   double factor = 1;      // their CPU time over the yardstick's forecast of it
   int measured_threads = 0, wanted_threads = 1;  // as MeasuredSpeed's
@@ -35,7 +36,8 @@ struct MeasuredSpeed {
   int tasks = 0;
   double factor = 1;       // CPU time over the yardstick
   double wall_factor = 0;  // wall time over the yardstick (0: no wall times)
-  int threads = 0;         // the thread count the measured tasks ran with (0: mixed or not recorded)
+  static constexpr int kMixedThreads = -1;
+  int threads = 0;         // the thread count the measured tasks ran with (0: not recorded; kMixedThreads)
   int wanted_threads = 1;  // the thread count asked for
 };
 struct DoneTask {

@@ -176,7 +176,8 @@ ReposeConfig::GrainEstimate ReposeConfig::grain_estimate() const {
 }
 
 double ReposeConfig::max_steps() const {
-  return std::ceil((2.0 * settle_time_limit + time_limit) / step_forecast().dt);
+  // Each stage is judged once a sample interval, so it may run one interval past its limit.
+  return std::ceil((2.0 * settle_time_limit + time_limit + 3.0 * sample_interval) / step_forecast().dt);
 }
 
 void ReposeConfig::validate() const {

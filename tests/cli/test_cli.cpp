@@ -83,13 +83,36 @@ TEST(Cli, ForecastsAtTheSpeedOfTheDatabasesDoneTasks) {
   // Tasks done in the database already are reused by a run: validate forecasts the rest.
   r = run_demcal({"validate", "j.json", "--db", "demcal.db"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.out.find("work: 2 of the 2 task(s) are done in demcal.db already (demcal run reuses them): nothing to run"),
+  EXPECT_NE(r.out.find("work: of the 2 task(s), demcal.db holds 2 done (demcal run reuses them); nothing to run"),
             std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("grain-steps"), std::string::npos) << r.out;
-  write(d.file("m.json"), collision_job("mix", {0.05, 0.02, 0.03}));
+  write(d.file("m.json"), collision_job("mix", {0.05, 0.06, 0.07}));  // none shared with k.json
   r = run_demcal({"validate", "m.json", "--db", "demcal.db"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.out.find("work: 1 of the 3 task(s) are done in demcal.db already (demcal run reuses them); the other 2 below"),
+  EXPECT_NE(r.out.find("work: of the 3 task(s), demcal.db holds 1 done (demcal run reuses them); the other 2 below"),
+            std::string::npos) << r.out;
+  {  // One of them failed there: a run leaves it unless asked to retry.
+    const demcal::jobs::Job mix = demcal::jobs::load_job_file(d.file("m.json"));
+    demcal::db::Store store(d.file("demcal.db"));
+    std::vector<demcal::db::NewTask> tasks;
+    for (const auto& t : mix.tasks) tasks.push_back({t.key, mix.scene, t.params.dump()});
+    store.put_job(mix.name, mix.spec.dump(), tasks);
+    const auto rows = store.tasks(mix.name);
+    ASSERT_TRUE(store.claim(rows[1].id, "w"));
+    demcal::db::Outcome failed;
+    failed.status = "failed";
+    failed.error = "synthetic";
+    failed.metrics = {{"cpu_s", 1.0}};
+    ASSERT_TRUE(store.finish(rows[1].id, "w", failed));
+    ASSERT_EQ(store.reset_failed(*store.find_job(mix.name)), 1);
+    EXPECT_TRUE(store.metrics(rows[1].id).empty()) << "a retried task shows no old run's metrics";
+    ASSERT_TRUE(store.claim(rows[1].id, "w"));
+    ASSERT_TRUE(store.finish(rows[1].id, "w", failed));
+  }
+  r = run_demcal({"validate", "m.json", "--db", "demcal.db"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("work: of the 3 task(s), demcal.db holds 1 done (demcal run reuses them), 1 failed (run leaves "
+                       "them unless --retry-failed); the other 1 below"),
             std::string::npos) << r.out;
   r = run_demcal({"validate", "k.json", "--db", "missing.db"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
