@@ -88,7 +88,7 @@ class Runner {
   std::unordered_map<std::int64_t, double> yardstick_s_;  // task id -> its forecast core-seconds at factor 1
   MeasuredSpeed speed_;
   BeatWatch beats_;  // other hosts' heartbeats, watched on this process's clock
-  bool work_is_bound_ = false;  // the scene forecasts every stage to its limit (until measured)
+  bool work_is_bound_ = false;  // the scene's forecast is every stage to its limit (a bound until measured)
   Counts counts_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
   bool superseded_ = false;  // another run recorded another spec under this job's name
