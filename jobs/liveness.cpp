@@ -72,13 +72,9 @@ std::string runner_token() {
 
 bool BeatWatch::alive(const std::string& token, std::optional<double> last_seen, double unix_now, double watch_s) {
   if (!last_seen) return true;
-  const auto it = seen_.find(token);
-  if (it == seen_.end()) {
-    seen_[token] = Seen{*last_seen, watch_s, std::nullopt};
-  } else if (it->second.stamp != *last_seen) {
-    it->second = Seen{*last_seen, watch_s, unix_now - *last_seen};
-  }
-  const double unchanged_for = watch_s - seen_[token].since;
+  const auto [it, first_sight] = seen_.try_emplace(token, Seen{*last_seen, watch_s, std::nullopt});
+  if (!first_sight && it->second.stamp != *last_seen) it->second = Seen{*last_seen, watch_s, unix_now - *last_seen};
+  const double unchanged_for = watch_s - it->second.since;
   if (unchanged_for >= kRunnerLeaseS) return false;
   if (unix_now - *last_seen < kRunnerLeaseS) return true;
   return unchanged_for < kRunnerConfirmS;

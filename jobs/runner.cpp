@@ -141,7 +141,7 @@ void Runner::prepare() {
       for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
       speed_ = measure_speed(store_, *scene_, threads_);
       const WorkForecast w = forecast_work(*scene_, params, speed_);
-      for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor;
+      for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor();
       work_is_bound_ = w.bounded_scene;
       *opt_.log << "work of the " << queue_.size() << " task(s) to run: " << describe(w, parallel) << "\n";
     }

@@ -11,9 +11,7 @@ namespace demcal::jobs {
 
 namespace {
 double yardstick_seconds(const Work& w) { return w.steps * w.grains * w.ns_per_grain_step * 1e-9; }
-}  // namespace
 
-namespace {
 // The median of (value, weight) pairs weighted by weight: a task slowed by a busy
 // machine moves it little, and small tasks, whose set-up the forecast does not count,
 // weigh as little as they cost.
@@ -84,21 +82,16 @@ WorkForecast forecast_work(const SceneDef& scene, const std::vector<nlohmann::js
   f.known = true;
   f.scene = scene.name;
   f.of = scene.work_of;
-  f.measured_on = speed.tasks;
-  f.factor = speed.tasks > 0 ? speed.factor : 1.0;
-  f.measured_threads = speed.threads;
-  f.wanted_threads = speed.wanted_threads;
+  f.speed = speed;
   // Measured CPU time holds the preparation as the done tasks had it.
   if (speed.tasks == 0) f.left_out = scene.work_left_out;
   f.lo = INFINITY;
   for (const auto& p : task_params) {
     const Work w = scene.work(p);
-    // Measured CPU time already holds how soon such tasks end.
-    f.upper_bound = f.upper_bound || (w.upper_bound && speed.tasks == 0);
     f.bounded_scene = f.bounded_scene || w.upper_bound;
     const double gs = w.steps * w.grains;
     f.lo = std::min(f.lo, gs), f.hi = std::max(f.hi, gs), f.grain_steps += gs;
-    f.task_core_seconds.push_back(yardstick_seconds(w) * f.factor);
+    f.task_core_seconds.push_back(yardstick_seconds(w) * f.factor());
     f.core_seconds += f.task_core_seconds.back();
   }
   return f;
@@ -120,30 +113,30 @@ std::string duration(double seconds) {
   else os << std::fixed << std::setprecision(hours < 240.0 ? 1 : 0) << hours / 24.0 << " days";
   return os.str();
 }
-std::string approx(double seconds) { return seconds < 60.0 ? "under a minute" : "about " + duration(seconds); }
-std::string approx(double seconds, bool upper_bound) {
-  if (!upper_bound) return approx(seconds);
-  return seconds < 60.0 ? "at most a minute" : "at most " + duration(seconds);
+std::string approx(double seconds, bool upper_bound = false) {
+  if (upper_bound) return seconds < 60.0 ? "at most a minute" : "at most " + duration(seconds);
+  return seconds < 60.0 ? "under a minute" : "about " + duration(seconds);
 }
 std::string speed_source(const WorkForecast& w) {
-  if (w.measured_on == 0) return "the speed docs/performance.md measures on this project's machine";
+  const MeasuredSpeed& m = w.speed;
+  if (m.tasks == 0) return "the speed docs/performance.md measures on this project's machine";
   std::ostringstream os;
-  os << std::fixed << std::setprecision(2) << w.factor;
+  os << std::fixed << std::setprecision(2) << m.factor;
   std::string ran;  // nothing for tasks from before the thread count was stored (0)
-  if (w.measured_threads == MeasuredSpeed::kMixedThreads)
+  if (m.threads == MeasuredSpeed::kMixedThreads)
     ran = ", run with differing thread counts";
-  else if (w.measured_threads > 0 && w.measured_threads != w.wanted_threads)
-    ran = ", run with " + std::to_string(w.measured_threads) + " thread(s)";
-  return "the speed of the last " + std::to_string(w.measured_on) + " done " + w.scene + " task(s) in this database" +
+  else if (m.threads > 0 && m.threads != m.wanted_threads)
+    ran = ", run with " + std::to_string(m.threads) + " thread(s)";
+  return "the speed of the last " + std::to_string(m.tasks) + " done " + w.scene + " task(s) in this database" +
          ran + " (their CPU time, preparation included: " + os.str() + "x the yardstick of docs/performance.md)";
 }
 }  // namespace
 
 std::string describe(const WorkForecast& w, int workers) {
   std::string s = w.of + " is " + sig2(w.lo) + (w.hi > w.lo * 1.005 ? " to " + sig2(w.hi) : std::string()) +
-                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds, w.upper_bound) +
+                  " grain-steps a task, " + sig2(w.grain_steps) + " in all: " + approx(w.core_seconds, w.upper_bound()) +
                   " of one core (" +
-                  (workers > 0 ? approx(makespan(w.task_core_seconds, {}, workers), w.upper_bound) + " on " +
+                  (workers > 0 ? approx(makespan(w.task_core_seconds, {}, workers), w.upper_bound()) + " on " +
                                      std::to_string(workers) + " worker(s)"
                                : std::string("divide by --workers")) +
                   ") at " + speed_source(w);
@@ -212,7 +205,7 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
 }
 
 std::string describe(const TimeLeft& t) {
-  const bool bound = t.forecast.upper_bound;
+  const bool bound = t.forecast.upper_bound();
   std::string s = std::to_string(t.pending + t.running) + " task(s) to go: ";
   if (t.pending == 0 && t.core_seconds == 0)
     s += t.running == 1 ? "the running one has taken longer than forecast" : "the running ones have taken longer than forecast";

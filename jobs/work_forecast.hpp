@@ -13,22 +13,6 @@
 
 namespace demcal::jobs {
 
-struct WorkForecast {
-  bool known = false;      // false: the scene cannot count its work beforehand (repose)
-  std::string of;          // what is counted ("the shear")
-  std::string left_out;    // what is not ("the preparation adds ...")
-  double lo = 0, hi = 0;   // grain-steps of the cheapest and dearest task
-  double grain_steps = 0;  // all tasks
-  double core_seconds = 0;
-  std::vector<double> task_core_seconds;  // each task's, in the order given
-  bool upper_bound = false;  // every stage to its limit at the yardstick: a bound, not an estimate
-  bool bounded_scene = false;  // the scene's work is such a bound (measured or not)
-  int measured_on = 0;    // done tasks the speed was measured on (0: the project's yardstick)
-  double factor = 1;      // their CPU time over the yardstick's forecast of it
-  int measured_threads = 0, wanted_threads = 1;  // as MeasuredSpeed's
-  std::string scene;
-};
-
 // Done tasks' cost against the yardstick: the median over them, weighted by their
 // forecast work, of CPU seconds (metric cpu_s, all threads, preparation included)
 // over the forecast's core-seconds, and the same of their wall time.
@@ -40,6 +24,25 @@ struct MeasuredSpeed {
   int threads = 0;         // the thread count the measured tasks ran with (0: not recorded; kMixedThreads)
   int wanted_threads = 1;  // the thread count asked for
 };
+
+struct WorkForecast {
+  bool known = false;      // false: the scene cannot count its work beforehand (repose)
+  std::string of;          // what is counted ("the shear")
+  std::string left_out;    // what is not ("the preparation adds ...")
+  double lo = 0, hi = 0;   // grain-steps of the cheapest and dearest task
+  double grain_steps = 0;  // all tasks
+  double core_seconds = 0;
+  std::vector<double> task_core_seconds;  // each task's, in the order given
+  bool bounded_scene = false;  // the scene's work is every stage to its limit (measured or not)
+  MeasuredSpeed speed;         // what it was forecast at (tasks 0: the project's yardstick)
+  std::string scene;
+
+  double factor() const { return speed.tasks > 0 ? speed.factor : 1.0; }
+  // A bound, not an estimate: every stage to its limit at the yardstick (measured CPU
+  // time already holds how soon such tasks end).
+  bool upper_bound() const { return bounded_scene && speed.tasks == 0; }
+};
+
 struct DoneTask {
   nlohmann::json params;
   double cpu_s = 0, wall_s = 0;

@@ -134,7 +134,7 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   ASSERT_TRUE(t.known);
   EXPECT_EQ(t.pending, 4);
   EXPECT_EQ(t.running, 0);
-  EXPECT_EQ(t.forecast.measured_on, 0);
+  EXPECT_EQ(t.forecast.speed.tasks, 0);
   double all = 0;
   for (const auto& r : job.tasks) all += yardstick(scene, r.params);
   EXPECT_NEAR(t.core_seconds, all, 1e-9 * all);
@@ -152,8 +152,8 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   ASSERT_TRUE(t.known);
   EXPECT_EQ(t.pending, 2);
   EXPECT_EQ(t.running, 1);
-  EXPECT_EQ(t.forecast.measured_on, 1);
-  EXPECT_NEAR(t.forecast.factor, 3.0, 1e-9);
+  EXPECT_EQ(t.forecast.speed.tasks, 1);
+  EXPECT_NEAR(t.forecast.factor(), 3.0, 1e-9);
   const double expected = 3.0 * (yardstick(scene, job.tasks[1].params) + yardstick(scene, job.tasks[2].params) +
                                  yardstick(scene, job.tasks[3].params)) - 1.0;
   EXPECT_NEAR(t.core_seconds, expected, 1e-6 * expected) << "the running task's second since it started is used";
@@ -188,7 +188,7 @@ TEST(WorkForecast, ReposeIsBoundedByItsTimeLimitsUntilDoneTasksSayWhatItCosts) {
   for (const auto& t : job.tasks) params.push_back(t.params);
   const jobs::WorkForecast bound = jobs::forecast_work(scene, params);
   ASSERT_TRUE(bound.known);
-  EXPECT_TRUE(bound.upper_bound);
+  EXPECT_TRUE(bound.upper_bound());
   // Both settlings (1.5 s each at quick) and the collapse, each to its limit: 4 s of
   // simulated time against 6 s.
   EXPECT_NEAR(bound.hi / bound.lo, (6.0 + 3 * 0.005) / (4.0 + 3 * 0.005), 1e-3);  // and a sample interval a stage
@@ -202,7 +202,7 @@ TEST(WorkForecast, ReposeIsBoundedByItsTimeLimitsUntilDoneTasksSayWhatItCosts) {
   const jobs::MeasuredSpeed m = jobs::measure_speed(scene, {{params[0], 0.25 * yard, 0.25 * yard, 1}});
   ASSERT_EQ(m.tasks, 1);
   const jobs::WorkForecast measured = jobs::forecast_work(scene, params, m);
-  EXPECT_FALSE(measured.upper_bound);
+  EXPECT_FALSE(measured.upper_bound());
   EXPECT_NEAR(measured.core_seconds, 0.25 * bound.core_seconds, 1e-9 * bound.core_seconds);
   const std::string now = jobs::describe(measured);
   EXPECT_EQ(now.find("at most"), std::string::npos) << now;
