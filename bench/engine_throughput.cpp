@@ -132,7 +132,9 @@ World prepared_pack(std::size_t n, int threads, bool rolling) {
     return w;
   }
   World w = dense_pack(n, threads, rolling, 100e3);
-  if (!file.empty()) save_pack(file, w);
+  if (!file.empty() && !save_pack(file, w))
+    std::fprintf(stderr, "warning: BENCH_PACK_DIR: cannot write %s; the pack is prepared again next time\n",
+                 file.c_str());
   return w;
 }
 

@@ -6,6 +6,8 @@
 #include "engine/world.hpp"
 
 #include <cstdio>
+#include <filesystem>
+#include <system_error>
 #include <string>
 #include <vector>
 
@@ -32,18 +34,31 @@ inline bool load_pack(const std::string& file, engine::Particles& p, std::vector
   return ok;
 }
 
-inline void save_pack(const std::string& file, const engine::World& w) {
-  std::FILE* f = std::fopen(file.c_str(), "wb");
-  if (!f) return;
+// Writes the pack beside `file` and renames it into place, creating the folder;
+// returns false (nothing left behind) when it cannot, so the caller can say so
+// instead of silently preparing the pack again on every run.
+inline bool save_pack(const std::string& file, const engine::World& w) {
+  std::error_code ec;
+  const std::filesystem::path dir = std::filesystem::path(file).parent_path();
+  if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+  const std::string part = file + ".part";
+  std::FILE* f = std::fopen(part.c_str(), "wb");
+  if (!f) return false;
   const engine::Particles& p = w.particles();
   const std::size_t n = p.size();
-  std::fwrite(&n, sizeof n, 1, f);
-  for (std::size_t i = 0; i < n; ++i) {
+  bool ok = std::fwrite(&n, sizeof n, 1, f) == 1;
+  for (std::size_t i = 0; ok && i < n; ++i) {
     const double rec[5] = {p.x[i].x(), p.x[i].y(), p.x[i].z(), p.r[i], p.m[i]};
-    std::fwrite(rec, sizeof rec, 1, f);
+    ok = std::fwrite(rec, sizeof rec, 1, f) == 1;
   }
-  for (const auto& wall : w.walls()) std::fwrite(wall.point.data(), sizeof(double), 3, f);
-  std::fclose(f);
+  for (const auto& wall : w.walls()) ok = ok && std::fwrite(wall.point.data(), sizeof(double), 3, f) == 3;
+  ok = (std::fclose(f) == 0) && ok;
+  if (ok) {
+    std::filesystem::rename(part, file, ec);
+    ok = !ec;
+  }
+  if (!ok) std::filesystem::remove(part, ec);
+  return ok;
 }
 
 }  // namespace demcal::bench
