@@ -958,10 +958,15 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     write_fidelity_chart(s, k, dir);
     s.files.push_back(k.chart);
   }
-  const fs::path csv = dir / (s.name + ".csv");
+  // A run of some knobs names its table after them, so that runs of other knobs
+  // into the same folder keep theirs (the charts are per knob already).
+  std::string stem = s.name;
+  if (knobs.size() < d.knobs.size())
+    for (const auto& k : knobs) stem += "-" + k.name;
+  const fs::path csv = dir / (stem + ".csv");
   write_fidelity_csv(s, csv);
   s.files.push_back(csv.string());
-  const fs::path rec = dir / (s.name + "_recommendation.txt");
+  const fs::path rec = dir / (stem + "_recommendation.txt");
   {
     std::ofstream r(rec);
     for (const auto& k : s.knobs) r << k.recommendation << "\n";

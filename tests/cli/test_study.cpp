@@ -129,7 +129,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
                                          "--workers", "1", "--db", "s.db", "--out", "f"};
   const Result r = run_demcal(args, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  for (const char* f : {"fidelity_dt.png", "fidelity.csv", "fidelity_recommendation.txt",
+  for (const char* f : {"fidelity_dt.png", "fidelity-dt.csv", "fidelity-dt_recommendation.txt",
                         "jobs/study-fidelity-quick-dt.json"}) {
     const fs::path p = d.path / "f" / f;
     EXPECT_TRUE(fs::exists(p) && fs::file_size(p) > 0) << f;
@@ -143,7 +143,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_NE(r.out.find("dt=2 seed 1: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("dt=2 seed 2: "), std::string::npos) << r.out;
   EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"2: 2/2 failed\""), std::string::npos);
-  const std::string csv = slurp(d.file("f/fidelity.csv"));
+  const std::string csv = slurp(d.file("f/fidelity-dt.csv"));
   EXPECT_NE(csv.find("phi_peak_deg_error"), std::string::npos) << csv;
   EXPECT_NE(csv.find("dt,2,0,0,2,2,"), std::string::npos) << csv;
   // The tasks are in the database under the written job, which validates as is.
@@ -152,12 +152,12 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_EQ(q.rc, 0) << q.err;
   EXPECT_NE(q.out.find("phi_cv_deg"), std::string::npos) << q.out;
   EXPECT_EQ(run_demcal({"validate", "f/jobs/study-fidelity-quick-dt.json"}, d.path.string()).rc, 0);
-  const std::string first = slurp(d.file("f/fidelity_recommendation.txt"));
+  const std::string first = slurp(d.file("f/fidelity-dt_recommendation.txt"));
   // Again: every task is reused (the failed ones stay failed), nothing runs.
   const Result again = run_demcal(args, d.path.string());
   ASSERT_EQ(again.rc, 0) << again.err;
   EXPECT_NE(again.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << again.out;
-  EXPECT_EQ(slurp(d.file("f/fidelity_recommendation.txt")), first);
+  EXPECT_EQ(slurp(d.file("f/fidelity-dt_recommendation.txt")), first);
 }
 
 TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
