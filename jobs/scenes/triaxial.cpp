@@ -143,7 +143,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   resolve_time_step(p, kSection, engine::TriaxialConfig{}.dt_factor);
   if (p.contains("density_scale") && p.contains("scaled_density"))
     throw JobError("triaxial.density_scale", "give density_scale or scaled_density, not both");
-  if (!p.contains("density_scale")) p.emplace("scaled_density", p.value("scaled_density", engine::TriaxialConfig{}.scaled_density));
+  // One grain density, however it was written: a factor on material.density becomes
+  // the density it gives, so that the same work has one key and is reused.
+  if (p.contains("density_scale")) {
+    p["scaled_density"] = p.value("density", engine::Material{}.density) * p["density_scale"].get<double>();
+    p.erase("density_scale");
+  }
+  if (!p.contains("scaled_density")) p["scaled_density"] = engine::TriaxialConfig{}.scaled_density;
   const Preset pre = preset(fidelity);
   if (!p.contains("particles")) p["particles"] = pre.particles;
   if (!p.contains("strain_rate")) p["strain_rate"] = pre.strain_rate;

@@ -488,6 +488,29 @@ TEST(TriaxialReposeScenes, ShearDampingEntersTheTaskOnlyWhenGiven) {
   }
 }
 
+// The grain density written as a factor on material.density, as the density itself,
+// or left to the default (2650 kg/m^3 x 1e9 = the seed's 2.65e12) is one task: one
+// key, so a job written either way reuses the other's work.
+TEST(TriaxialReposeScenes, OneGrainDensityIsOneTaskHoweverItIsWritten) {
+  json by_factor = triaxial_base();  // density_scale 1e9
+  json by_value = triaxial_base();
+  by_value["triaxial"].erase("density_scale");
+  by_value["triaxial"]["scaled_density"] = 2.65e12;
+  json by_default = by_value;
+  by_default["triaxial"].erase("scaled_density");
+  const Job a = parse(by_factor), b = parse(by_value), c = parse(by_default);
+  ASSERT_EQ(a.tasks.size(), b.tasks.size());
+  for (std::size_t i = 0; i < a.tasks.size(); ++i) {
+    EXPECT_EQ(a.tasks[i].key, b.tasks[i].key) << a.tasks[i].params.dump() << "\n" << b.tasks[i].params.dump();
+    EXPECT_EQ(a.tasks[i].key, c.tasks[i].key);
+    EXPECT_DOUBLE_EQ(a.tasks[i].params.at("scaled_density").get<double>(), 2.65e12);
+    EXPECT_FALSE(a.tasks[i].params.contains("density_scale"));
+  }
+  // A different factor is different work.
+  by_factor["triaxial"]["density_scale"] = 1e8;
+  EXPECT_NE(parse(by_factor).tasks[0].key, a.tasks[0].key);
+}
+
 TEST(TriaxialReposeScenes, BaseJobsAreValid) {
   EXPECT_EQ(error_of(triaxial_base()), "");
   EXPECT_EQ(error_of(repose_base()), "");
