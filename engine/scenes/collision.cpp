@@ -55,6 +55,7 @@ void CollisionConfig::validate() const {
   if (!std::isfinite(duration) || duration < 0.0) throw ConfigError("collision.duration", "must be finite and >= 0");
   if (sample_every < 1) throw ConfigError("collision.sample_every", "must be at least 1");
   if (threads < 1) throw ConfigError("threads", "must be at least 1");
+  if (!std::isfinite(energy_guard)) throw ConfigError("collision.energy_guard", "must be finite (< 0: off)");
 }
 
 Metrics CollisionResult::metrics() const {
@@ -139,6 +140,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   const RunClock clock;
   try {
     world.refresh();
+    if (cfg.energy_guard >= 0.0) world.enable_energy_guard(cfg.energy_guard, std::min(1000L, std::max(1L, total_steps / 20)));
     sample();
     if (obs) obs->on_snapshot("initial", world.time(), world.particles());
     while (world.step_count() < total_steps) {

@@ -30,6 +30,8 @@ std::vector<ParamSpec> collision_params() {
   p.push_back(real_param(kSection, "dt_factor", "dt_factor", nullptr).above(0).at_most(10));
   p.push_back(bool_param(kSection, "keep_friction", "keep_friction", d.keep_friction));
   p.push_back(bool_param(kSection, "allow_unstable_dt", "allow_unstable_dt", d.allow_unstable_dt));
+  // No fixed default: off where allow_unstable_dt asks to watch the method fail.
+  p.push_back(real_param(kSection, "energy_guard", "energy_guard", nullptr).at_most(1e6));
   return p;
 }
 
@@ -46,6 +48,7 @@ engine::CollisionConfig config_from(const nlohmann::json& p) {
   if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
   c.keep_friction = p.at("keep_friction").get<bool>();
   c.allow_unstable_dt = p.at("allow_unstable_dt").get<bool>();
+  c.energy_guard = p.value("energy_guard", c.energy_guard);
   c.seed = p.at("seed").get<std::uint64_t>();
   return c;
 }
@@ -61,7 +64,10 @@ std::int64_t default_steps(const std::string& fidelity) {
 }
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
-  resolve_time_step(p, kSection, 0.2);
+  resolve_time_step(p, kSection, engine::CollisionConfig{}.dt_factor);
+  // A run that may go past the critical step is there to show the energy it gains.
+  if (!p.contains("energy_guard"))
+    p["energy_guard"] = p.at("allow_unstable_dt").get<bool>() ? -1.0 : engine::CollisionConfig{}.energy_guard;
   if (p.contains("duration")) {
     // The engine derives steps and sampling from the duration and dt.
     for (const char* k : {"steps", "sample_every"})

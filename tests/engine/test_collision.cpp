@@ -50,6 +50,32 @@ TEST(CollisionScene, BeyondTheCriticalStepIsRefusedUnlessAStudyAsksForIt) {
   EXPECT_FALSE(r.outcome.ok() && r.max_relative_error < 1e-2) << "an unstable step went unnoticed";
 }
 
+// Below the critical step but far past the accurate one, the integrator gains
+// energy a frictionless, undamped gas cannot: the run stops as unstable, naming the
+// growth, instead of finishing "done". With the guard off (stability studies) it
+// runs on and the gain is the measurement.
+TEST(CollisionScene, EnergyGainedBelowTheCriticalStepStopsTheRun) {
+  CollisionConfig c = small();
+  c.particles = 300;
+  c.steps = 100000;
+  c.dt_factor = 1.3;  // 0.92 of the pair normal limit: accepted
+  const CollisionResult r = run_collision(c);
+  ASSERT_LT(r.dt, r.dt_critical);
+  EXPECT_EQ(r.outcome.status, SceneStatus::unstable) << r.outcome.message;
+  EXPECT_NE(r.outcome.message.find("total energy grew by"), std::string::npos) << r.outcome.message;
+  EXPECT_NE(r.outcome.message.find("limit 2%"), std::string::npos) << r.outcome.message;
+  c.energy_guard = -1.0;
+  const CollisionResult off = run_collision(c);
+  ASSERT_TRUE(off.outcome.ok()) << off.outcome.message;
+  EXPECT_GT(off.energy_final / off.energy_initial - 1.0, 0.02);
+  // The default step stays far from the guard.
+  c = small();
+  c.steps = 100000;
+  const CollisionResult fine = run_collision(c);
+  ASSERT_TRUE(fine.outcome.ok()) << fine.outcome.message;
+  EXPECT_LT(fine.max_relative_error, 2e-3);
+}
+
 TEST(CollisionScene, TheForecastStepAndLimitAreTheRunsBeforeAnyGrainExists) {
   CollisionConfig c = small();
   c.dt_factor = 0.5;

@@ -31,7 +31,8 @@ TEST(Grid, SingleTaskWithoutLists) {
   const json& p = job.tasks[0].params;
   EXPECT_EQ(p["particles"], 20);
   EXPECT_EQ(p["seed"], 1);
-  EXPECT_DOUBLE_EQ(p["dt_factor"].get<double>(), 0.2);  // resolved default
+  EXPECT_DOUBLE_EQ(p["dt_factor"].get<double>(), 0.3);  // resolved default: the timestep study's
+  EXPECT_DOUBLE_EQ(p["energy_guard"].get<double>(), 0.02);
   EXPECT_EQ(p["sample_every"], 1);                      // steps / 200, at least 1
   EXPECT_FALSE(p.contains("dt"));
 }
@@ -96,6 +97,10 @@ TEST(Grid, AStepPastTheCriticalOneIsNotedBeforeTheRun) {
   ASSERT_EQ(study.notes.size(), 1u);
   EXPECT_EQ(study.notes[0].find("will refuse"), std::string::npos) << study.notes[0];
   EXPECT_NE(study.notes[0].find("allow_unstable_dt runs it anyway"), std::string::npos) << study.notes[0];
+  // ... and runs without the energy guard, whose gain is what it measures, unless it asks.
+  EXPECT_DOUBLE_EQ(study.tasks[0].params["energy_guard"].get<double>(), -1.0);
+  j["collision"]["energy_guard"] = 0.5;
+  EXPECT_DOUBLE_EQ(parse(j).tasks[0].params["energy_guard"].get<double>(), 0.5);
 }
 
 TEST(Grid, KeyDependsOnSceneParamsAndIsStable) {
@@ -130,7 +135,9 @@ TEST(Grid, KeysDoNotChangeBetweenBuilds) {
   EXPECT_EQ(first_key("quickstart.json"), "e128670c626396fb4bc1df738d8f9974");
   EXPECT_EQ(first_key("seed-study/table-2-2.json"), "9e254c978946e43bbbdd6591ef9c0d34");
   EXPECT_EQ(first_key("seed-study/repose.json"), "14c01a1b375fbf8944c48d90ccf66908");
-  EXPECT_EQ(first_key("collision.json"), "6271bcca4b5cfe0bbe279d242e3b4be0");
+  // Changed on purpose 2026-11-28: collision tasks resolve energy_guard (0.02, off where
+  // allow_unstable_dt); a collision task is seconds to rerun.
+  EXPECT_EQ(first_key("collision.json"), "8eda0e74d1e7ca7f5a7a2d7a0320a4bc");
 }
 
 TEST(Grid, FidelitySelectsDefaultSteps) {
