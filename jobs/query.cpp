@@ -148,11 +148,15 @@ std::vector<std::string> headline_metrics(const std::vector<ResultRow>& rows, co
 std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, const std::vector<std::string>& asked) {
   const std::vector<std::string> stored = stored_metrics(rows);
   if (asked.empty() || asks_all(asked)) return stored;
+  const auto is_stored = [&](const std::string& n) { return std::find(stored.begin(), stored.end(), n) != stored.end(); };
+  // The names map and fit take (phi_peak, repose) read the stored angle (phi_peak_deg).
+  std::vector<std::string> out;
+  for (const auto& a : asked) out.push_back(!is_stored(a) && is_stored(a + "_deg") ? a + "_deg" : a);
   // A name no finished task stores is a typo, as an unknown --where key is (while
   // nothing has finished, every metric is legitimately absent).
   if (!stored.empty())
-    for (const auto& a : asked)
-      if (std::find(stored.begin(), stored.end(), a) == stored.end()) {
+    for (const auto& a : out)
+      if (!is_stored(a)) {
         std::string known, guess = closest(a, stored);
         for (const auto& k : stored) {
           known += (known.empty() ? "" : ", ") + k;
@@ -161,7 +165,7 @@ std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, cons
         throw JobError("--metrics", "no task stores a metric \"" + a + "\"" +
                                         (guess.empty() ? "" : " (did you mean \"" + guess + "\"?)") + "; stored: " + known);
       }
-  return asked;
+  return out;
 }
 
 double metric_of(const ResultRow& r, const std::string& name) {
