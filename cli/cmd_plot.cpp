@@ -10,6 +10,35 @@
 #include <iostream>
 
 namespace demcal::cli {
+namespace {
+
+// What a series is usually looked at for, when --x or --y is left out.
+struct PlotDefault {
+  const char *scene, *series, *x, *y;
+};
+constexpr PlotDefault kDefaults[] = {
+    {"triaxial", "triaxial", "eps1", "phi_mob_deg,eps_v"},
+    {"collision", "energy", "step", "total,kinetic,elastic"},
+    {"repose", "energy", "time", "ke_per_grain,ke_flow_per_grain"},
+    {"repose", "prep", "time", "ke_per_grain,ke_flow_per_grain"},
+    {"repose", "profile", "x", "h"},
+};
+
+const PlotDefault* plot_default(const std::string& scene, const std::string& series) {
+  for (const auto& d : kDefaults)
+    if (scene == d.scene && series == d.series) return &d;
+  return nullptr;
+}
+
+std::vector<std::string> split_commas(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t from = 0;
+  for (std::size_t at; (at = s.find(',', from)) != std::string::npos; from = at + 1) out.push_back(s.substr(from, at - from));
+  out.push_back(s.substr(from));
+  return out;
+}
+
+}  // namespace
 
 void add_plot(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("plot", "Draw a task's time series with gnuplot (PNG or SVG)");
@@ -22,16 +51,25 @@ void add_plot(CLI::App& app, int& exit_code) {
   cmd->add_option("TASK", a->task, "task id (the first column of demcal query)")->required();
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--series", a->series, "series name, e.g. energy")->required();
-  cmd->add_option("--x", a->x, "column for the x axis, e.g. step")->required();
-  cmd->add_option("--y", a->y, "columns to draw (comma separated), e.g. total,kinetic")->required()->delimiter(',');
-  cmd->add_option("--out", a->out, "output file, .png or .svg")->required()->check(kPlainPath);
+  cmd->add_option("--x", a->x, "column for the x axis, e.g. step (default for the scenes' own series: triaxial eps1, energy step or time, profile x)");
+  cmd->add_option("--y", a->y, "columns to draw (comma separated), e.g. total,kinetic (default: triaxial phi_mob_deg,eps_v; energy total,kinetic,elastic or the kinetic energy per grain; profile h)")->delimiter(',');
+  cmd->add_option("--out", a->out, "output file, .png or .svg (default: taskID-SERIES.png)")->check(kPlainPath);
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
+      if (a->out.empty()) a->out = "task" + std::to_string(a->task) + "-" + a->series + ".png";
       require_writable_file("--out", a->out);
       require_db(a->db);
       db::Store store(a->db, /*read_only=*/true);
       const auto task = store.task(a->task);
       if (!task) throw jobs::JobError("TASK", "no task with id " + std::to_string(a->task));
+      if (a->x.empty() || a->y.empty()) {
+        const PlotDefault* d = plot_default(task->scene, a->series);
+        if (!d)
+          throw jobs::JobError(a->x.empty() ? "--x" : "--y", "required for series \"" + a->series + "\" of a " +
+                                                               task->scene + " task (no default for it)");
+        if (a->x.empty()) a->x = d->x;
+        if (a->y.empty()) a->y = split_commas(d->y);
+      }
       const std::string h5 = jobs::task_hdf5(store, a->task);
       if (h5.empty())
         throw jobs::JobError("TASK", "task " + std::to_string(a->task) + " has no stored series (status " + task->status + ")");

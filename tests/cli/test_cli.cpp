@@ -499,6 +499,15 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "nope", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("nope"), std::string::npos);
+  // The scene's own series draw with their usual columns into taskID-SERIES.png.
+  r = run_demcal({"plot", id, "--series", "energy"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_GT(fs::file_size(d.file("task" + id + "-energy.png")), 1000u);
+  EXPECT_NE(r.out.find("task" + id + "-energy.png"), std::string::npos) << r.out;
+  // A series with no default needs its columns named.
+  r = run_demcal({"plot", id, "--series", "profile"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--x: required for series \"profile\" of a collision task"), std::string::npos) << r.err;
   r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   // An output folder that does not exist is the command line's fault, said before gnuplot runs.
