@@ -138,6 +138,12 @@ void TriaxialConfig::validate() const {
   positive(max_overlap_fraction, "numerics.max_overlap_fraction");
   if (!(sample_strain > 0.0 && sample_strain <= axial_strain))
     throw ConfigError("triaxial.sample_strain", "must lie in (0, axial_strain]");
+  // A row holds 27 numbers: more than a few million rows is memory, not resolution.
+  if (sample_steps < 0) throw ConfigError("triaxial.sample_steps", "must be >= 0 (0: sample by strain)");
+  if (sample_steps > 0 && !step_forecast().exceeds() && shear_steps() / static_cast<double>(sample_steps) > 2e6)
+    throw ConfigError("triaxial.sample_steps", "gives " + fmt(shear_steps() / static_cast<double>(sample_steps)) +
+                                                   " series rows over the shear (" + fmt(shear_steps()) +
+                                                   " steps); at least " + fmt(std::ceil(shear_steps() / 2e6)));
   if (!(shear_ramp_strain >= 0.0 && shear_ramp_strain < 0.5 * axial_strain))
     throw ConfigError("triaxial.shear_ramp_strain", "must lie in [0, axial_strain / 2)");
   if (!(cv_from >= 0.0 && cv_to > cv_from)) throw ConfigError("triaxial.cv_window", "needs 0 <= from < to");
@@ -634,7 +640,9 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       set_axial_speed();
       world.step();
       e1 = (L0[2] - rig.length(2)) / L0[2];
-      if (e1 >= next - 0.5 * dstrain || e1 >= end) {
+      const bool due = cfg.sample_steps > 0 ? (world.step_count() - s0) % cfg.sample_steps == 0
+                                             : e1 >= next - 0.5 * dstrain;
+      if (due || e1 >= end) {
         sample();
         next += cfg.sample_strain;
         if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));

@@ -100,6 +100,7 @@ struct TriaxialConfig {
 
   // Output
   double sample_strain = 0.001;              // series row every this much eps1
+  long sample_steps = 0;                     // > 0: a row every this many shear steps instead
   double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
   double quasi_static_inertial = 1e-3;       // warn above this inertial number
   double dilatancy_window = 0.01;            // eps1 span of the dilatancy-angle difference

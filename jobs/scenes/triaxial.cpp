@@ -65,6 +65,8 @@ std::vector<ParamSpec> triaxial_params() {
                   .above(0).at_most(1));
   // Output; the critical-state window defaults to the last third of the shear.
   p.push_back(real_param(kSection, "sample_strain", "sample_strain", d.sample_strain).above(0).below(0.6));
+  // No default: a job that does not sample by steps keeps the keys it had.
+  p.push_back(int_param(kSection, "sample_steps", "sample_steps", nullptr).at_least(1).at_most(1e12));
   p.push_back(real_param(kSection, "cv_from", "cv_from", nullptr).at_least(0).below(0.6));
   p.push_back(real_param(kSection, "cv_to", "cv_to", nullptr).above(0).below(0.6));
   p.push_back(real_param(kSection, "quasi_static_inertial", "quasi_static_inertial", d.quasi_static_inertial)
@@ -104,6 +106,7 @@ engine::TriaxialConfig config_from(const nlohmann::json& p) {
   c.frictionless_dt_scale = p.value("frictionless_dt_scale", 0.0);
   c.max_overlap_fraction = p.at("max_overlap_fraction").get<double>();
   c.sample_strain = p.at("sample_strain").get<double>();
+  c.sample_steps = p.value("sample_steps", std::int64_t(0));
   c.cv_from = p.at("cv_from").get<double>();
   c.cv_to = p.at("cv_to").get<double>();
   c.quasi_static_inertial = p.at("quasi_static_inertial").get<double>();

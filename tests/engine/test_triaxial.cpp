@@ -178,6 +178,26 @@ TEST(TriaxialConfig, ValidateNamesTheField) {
   c.frictionless_dt_scale = 5.0;
   c.packing = Packing::loose;  // no frictionless stage: the scale is not used
   EXPECT_EQ(rejected_field(c), "");
+  c = TriaxialConfig{};
+  c.sample_steps = -1;
+  EXPECT_EQ(rejected_field(c), "triaxial.sample_steps");
+  c.sample_steps = 1;  // ~1.5 million rows of the default shear: memory, not resolution
+  EXPECT_EQ(rejected_field(c), "");
+  c.strain_rate = 1e-6;
+  EXPECT_EQ(rejected_field(c), "triaxial.sample_steps");
+}
+
+// design §3: a row every set number of steps instead of every so much strain.
+TEST(TriaxialScene, SeriesSampledByStepCount) {
+  TriaxialConfig c = short_loose(0.01, 0.001);
+  c.sample_steps = 1000;
+  const TriaxialResult r = run_triaxial(c);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  ASSERT_GE(r.series.rows.size(), 10u);
+  const std::size_t step = r.series.column("step");
+  for (std::size_t k = 2; k + 1 < r.series.rows.size(); ++k)
+    EXPECT_DOUBLE_EQ(r.series.rows[k][step] - r.series.rows[k - 1][step], 1000.0) << k;
+  EXPECT_NEAR(col(r, r.series.rows.size() - 1, "eps1"), 0.01, 1e-4);  // and the end, as by strain
 }
 
 TEST(TriaxialScene, ServoReachesP0WithinOnePercent) {
