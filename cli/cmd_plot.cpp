@@ -6,6 +6,8 @@
 #include "jobs/query.hpp"
 #include "jobs/series_plot.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <iostream>
 
@@ -56,7 +58,11 @@ void add_plot(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: taskID-SERIES.png)")->check(kPlainPath);
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {
-      if (a->out.empty()) a->out = "task" + std::to_string(a->task) + "-" + a->series + ".png";
+      if (a->out.empty()) {  // a file here, whatever the series is called
+        std::string name = a->series;
+        std::replace_if(name.begin(), name.end(), [](char c) { return !std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-'; }, '_');
+        a->out = "task" + std::to_string(a->task) + "-" + name + ".png";
+      }
       require_writable_file("--out", a->out);
       require_db(a->db);
       db::Store store(a->db, /*read_only=*/true);

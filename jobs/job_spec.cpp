@@ -217,7 +217,7 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     }
     Task t;
     t.index = i;
-    t.key = task_key(scene.name, params[i], job.snapshots);
+    t.key = task_key(scene.name, scene.key_params ? scene.key_params(params[i]) : params[i], job.snapshots);
     t.params = std::move(params[i]);
     job.tasks.push_back(std::move(t));
   }

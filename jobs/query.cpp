@@ -149,9 +149,13 @@ std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, cons
   const std::vector<std::string> stored = stored_metrics(rows);
   if (asked.empty() || asks_all(asked)) return stored;
   const auto is_stored = [&](const std::string& n) { return std::find(stored.begin(), stored.end(), n) != stored.end(); };
-  // The names map and fit take (phi_peak, repose) read the stored angle (phi_peak_deg).
+  // A name without its unit reads the stored angle: the names map and fit take
+  // (phi_peak, repose) read phi_peak_deg, repose_deg. Each column once.
   std::vector<std::string> out;
-  for (const auto& a : asked) out.push_back(!is_stored(a) && is_stored(a + "_deg") ? a + "_deg" : a);
+  for (const auto& a : asked) {
+    const std::string name = !is_stored(a) && is_stored(a + "_deg") ? a + "_deg" : a;
+    if (std::find(out.begin(), out.end(), name) == out.end()) out.push_back(name);
+  }
   // A name no finished task stores is a typo, as an unknown --where key is (while
   // nothing has finished, every metric is legitimately absent).
   if (!stored.empty())

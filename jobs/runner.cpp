@@ -480,7 +480,10 @@ std::string describe_task(const Job& job, std::size_t index, std::int64_t task_i
   const std::string s = "task " + std::to_string(task_id);
   if (index >= job.tasks.size()) return s;
   std::string axes;
-  for (const auto& a : job.axes) axes += " " + a + "=" + job.tasks[index].params.at(a).dump();
+  // An axis value that is the default may be left out of the resolved task (a
+  // "uniform" grading keeps the key it always had).
+  const nlohmann::json& p = job.tasks[index].params;
+  for (const auto& a : job.axes) axes += " " + a + "=" + (p.contains(a) ? p.at(a).dump() : std::string("default"));
   if (job.replicas > 1) axes += std::string(" seed=") + job.tasks[index].params.at("seed").dump();
   return s + " (#" + std::to_string(index) + (axes.empty() ? "" : ":" + axes) + ")";
 }

@@ -54,6 +54,9 @@ struct SceneDef {
   // counts ("the shear") and what it leaves out; null where a scene cannot say.
   std::function<Work(const nlohmann::json& params)> work;
   std::string work_of, work_left_out;
+  // The parameters a task's key hashes, where one setting has several spellings (the
+  // same work must have one key to be reused); null: the parameters as they are.
+  std::function<nlohmann::json(const nlohmann::json& params)> key_params;
 };
 
 const SceneDef* find_scene(const std::string& name);

@@ -646,12 +646,14 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
         sample();
         next += cfg.sample_strain;
         if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
-        if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < end) {
-          char label[32];
-          std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
-          obs->on_snapshot(label, world.time(), world.particles());
-          next_snapshot += snapshot_strain;
-        }
+      }
+      // Frames at their strain whatever the rows' spacing (rows every N steps may
+      // span more than a frame's 0.05).
+      if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < end) {
+        char label[32];
+        std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
+        obs->on_snapshot(label, world.time(), world.particles());
+        next_snapshot += snapshot_strain;
       }
     }
     if (obs) obs->on_snapshot("final", world.time(), world.particles());

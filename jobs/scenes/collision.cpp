@@ -48,7 +48,7 @@ engine::CollisionConfig config_from(const nlohmann::json& p) {
   if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
   c.keep_friction = p.at("keep_friction").get<bool>();
   c.allow_unstable_dt = p.at("allow_unstable_dt").get<bool>();
-  c.energy_guard = p.value("energy_guard", c.energy_guard);
+  c.energy_guard = p.value("energy_guard", c.allow_unstable_dt ? -1.0 : c.energy_guard);  // as resolve() fills it
   c.seed = p.at("seed").get<std::uint64_t>();
   return c;
 }
@@ -124,7 +124,8 @@ SceneDef scene_collision() {
                     return Work{steps, static_cast<double>(c.particles), 20.0};
                   },
                   /*work_of=*/"the collision run",
-                  /*work_left_out=*/""};
+                  /*work_left_out=*/"",
+                  /*key_params=*/nullptr};
 }
 
 }  // namespace demcal::jobs

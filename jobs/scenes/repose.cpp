@@ -232,7 +232,8 @@ SceneDef scene_repose() {
                   },
                   /*work_of=*/"the run to every stage's time limit",
                   /*work_left_out=*/"a heap that comes to rest sooner costs less (tasks measured here took 12-50% of it); once done "
-                                    "repose tasks are in the database, validate --db and run forecast at what they cost"};
+                                    "repose tasks are in the database, validate --db and run forecast at what they cost",
+                  /*key_params=*/nullptr};
 }
 
 }  // namespace demcal::jobs

@@ -146,13 +146,8 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   resolve_time_step(p, kSection, engine::TriaxialConfig{}.dt_factor);
   if (p.contains("density_scale") && p.contains("scaled_density"))
     throw JobError("triaxial.density_scale", "give density_scale or scaled_density, not both");
-  // One grain density, however it was written: a factor on material.density becomes
-  // the density it gives, so that the same work has one key and is reused.
-  if (p.contains("density_scale")) {
-    p["scaled_density"] = p.value("density", engine::Material{}.density) * p["density_scale"].get<double>();
-    p.erase("density_scale");
-  }
-  if (!p.contains("scaled_density")) p["scaled_density"] = engine::TriaxialConfig{}.scaled_density;
+  if (!p.contains("density_scale") && !p.contains("scaled_density"))
+    p["scaled_density"] = engine::TriaxialConfig{}.scaled_density;
   const Preset pre = preset(fidelity);
   if (!p.contains("particles")) p["particles"] = pre.particles;
   if (!p.contains("strain_rate")) p["strain_rate"] = pre.strain_rate;
@@ -176,6 +171,17 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   } catch (const engine::ConfigError& e) {
     throw_as_job_error(e, job_path(e.field()));
   }
+}
+
+// One grain density, however it was written: a factor on material.density is keyed
+// as the density it gives, so that the same work has one key and is reused. The task
+// keeps the spelling its job used (a grid axis, --where).
+nlohmann::json key_params(const nlohmann::json& p) {
+  if (!p.contains("density_scale")) return p;
+  nlohmann::json k = p;
+  k["scaled_density"] = k.value("density", engine::Material{}.density) * k["density_scale"].get<double>();
+  k.erase("density_scale");
+  return k;
 }
 
 // Coordination numbers at the start and end of shear, from the series.
@@ -266,7 +272,8 @@ SceneDef scene_triaxial() {
                                 ns_per_grain_step(static_cast<double>(c.particles))};
                   },
                   /*work_of=*/"the shear",
-                  /*work_left_out=*/"the preparation adds about 3-15% at the default strain"};
+                  /*work_left_out=*/"the preparation adds about 3-15% at the default strain",
+                  /*key_params=*/key_params};
 }
 
 }  // namespace demcal::jobs

@@ -31,6 +31,9 @@ TEST(Query, TheNamesMapAndFitTakeReadTheStoredAngles) {
   EXPECT_EQ(by_alias.str(), by_name.str());
   EXPECT_NE(by_alias.str().find("phi_peak_deg,phi_cv_deg"), std::string::npos) << by_alias.str();
   EXPECT_NE(by_alias.str().find("40.25"), std::string::npos) << by_alias.str();
+  std::ostringstream both;  // asked twice, shown once
+  demcal::jobs::print_rows(both, rows, {"phi_peak", "phi_peak_deg", "phi_cv"}, Format::csv);
+  EXPECT_EQ(both.str(), by_name.str());
   // A name neither stored nor an angle's is still a typo.
   std::ostringstream sink;
   try {

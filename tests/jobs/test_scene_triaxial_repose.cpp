@@ -503,12 +503,22 @@ TEST(TriaxialReposeScenes, OneGrainDensityIsOneTaskHoweverItIsWritten) {
   for (std::size_t i = 0; i < a.tasks.size(); ++i) {
     EXPECT_EQ(a.tasks[i].key, b.tasks[i].key) << a.tasks[i].params.dump() << "\n" << b.tasks[i].params.dump();
     EXPECT_EQ(a.tasks[i].key, c.tasks[i].key);
-    EXPECT_DOUBLE_EQ(a.tasks[i].params.at("scaled_density").get<double>(), 2.65e12);
-    EXPECT_FALSE(a.tasks[i].params.contains("density_scale"));
+    // The task keeps the job's spelling: a grid axis and --where read it.
+    EXPECT_DOUBLE_EQ(a.tasks[i].params.at("density_scale").get<double>(), 1e9);
   }
-  // A different factor is different work.
-  by_factor["triaxial"]["density_scale"] = 1e8;
-  EXPECT_NE(parse(by_factor).tasks[0].key, a.tasks[0].key);
+  // A different factor is different work, and a grid over the factor names its tasks.
+  by_factor["triaxial"].erase("density_scale");
+  by_factor["grid"]["density_scale"] = {1e8, 1e9};
+  const Job grid = parse(by_factor);
+  ASSERT_EQ(grid.tasks.size(), 4u);
+  for (std::size_t i = 0; i < grid.tasks.size(); ++i) {
+    const json& p = grid.tasks[i].params;
+    if (p.at("theta_deg").get<double>() != a.tasks[0].params.at("theta_deg").get<double>()) continue;
+    const bool same = p.at("density_scale").get<double>() == 1e9;
+    EXPECT_EQ(grid.tasks[i].key == a.tasks[0].key, same) << p.dump();
+    const std::string label = demcal::jobs::describe_task(grid, i, 7);
+    EXPECT_NE(label.find(same ? "density_scale=1000000000.0" : "density_scale=100000000.0"), std::string::npos) << label;
+  }
 }
 
 TEST(TriaxialReposeScenes, BaseJobsAreValid) {
