@@ -164,7 +164,7 @@ std::vector<std::string> metric_columns(const std::vector<ResultRow>& rows, cons
         std::string known, guess = closest(a, stored);
         for (const auto& k : stored) {
           known += (known.empty() ? "" : ", ") + k;
-          if (k.rfind(a + "_", 0) == 0 && guess.empty()) guess = k;  // phi_peak -> phi_peak_deg (fit's names)
+          if (k.rfind(a + "_", 0) == 0 && guess.empty()) guess = k;  // a name cut short: a stored name it begins
         }
         throw JobError("--metrics", "no task stores a metric \"" + a + "\"" +
                                         (guess.empty() ? "" : " (did you mean \"" + guess + "\"?)") + "; stored: " + known);

@@ -2,6 +2,8 @@
 
 #include "db/merge.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
 
 namespace demcal::jobs {
@@ -23,6 +25,16 @@ const std::vector<SceneDef>& all_scenes() {
   return scenes;
 }
 }  // namespace
+
+double ns_per_grain_step_at(const std::vector<std::pair<double, double>>& measured, double grains) {
+  const double g = std::log10(std::max(grains, 1.0));
+  if (g <= std::log10(measured.front().first)) return measured.front().second;
+  for (std::size_t k = 1; k < measured.size(); ++k) {
+    const double x0 = std::log10(measured[k - 1].first), x1 = std::log10(measured[k].first);
+    if (g <= x1) return measured[k - 1].second + (measured[k].second - measured[k - 1].second) * (g - x0) / (x1 - x0);
+  }
+  return measured.back().second;
+}
 
 engine::Metrics timing_metrics(const engine::Metrics& all) {
   engine::Metrics out;

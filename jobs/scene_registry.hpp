@@ -29,6 +29,10 @@ struct SceneOutput {
 // cost is the user's too, and no mechanics of a run that did not finish may pass.
 engine::Metrics timing_metrics(const engine::Metrics& all);
 
+// A scene's speed at `grains` from speeds measured at a few sample sizes ({grains,
+// ns per grain-step}, increasing grains): piecewise linear in log N, held at the ends.
+double ns_per_grain_step_at(const std::vector<std::pair<double, double>>& measured, double grains);
+
 struct Work {
   double steps = 0, grains = 0;
   double ns_per_grain_step = 0;  // the scene's speed on one core of the project's machine

@@ -633,11 +633,10 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
             note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";
         } else {
           note << "the heap's profile was not judged: " << still.why;
-          const double room = cfg.min_collapse_time + cfg.rest_profile_window;
-          if (cfg.time_limit < room)
+          if (cfg.profile_check_has_no_room())
             note << " (repose.time_limit " << cfg.time_limit << " s leaves no room for the " << cfg.rest_profile_window
-                 << " s window after repose.min_collapse_time " << cfg.min_collapse_time << " s: raise it above " << room
-                 << " s for the check to run)";
+                 << " s window after repose.min_collapse_time " << cfg.min_collapse_time << " s: raise it above "
+                 << cfg.profile_check_time() << " s for the check to run)";
         }
         profile_note = note.str();
       }

@@ -128,6 +128,10 @@ struct ReposeConfig {
   // The most steps a task can take: both preparation settlings and the collapse, each
   // to its time limit (a heap that comes to rest sooner stops sooner).
   double max_steps() const;
+  // The time the rest-by-profile check needs (its window after min_collapse_time),
+  // and whether time_limit leaves it none (the check is on but can never run).
+  double profile_check_time() const { return min_collapse_time + rest_profile_window; }
+  bool profile_check_has_no_room() const { return rest_profile_window > 0.0 && time_limit < profile_check_time(); }
 };
 
 struct ReposeResult {

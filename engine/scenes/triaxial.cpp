@@ -140,10 +140,13 @@ void TriaxialConfig::validate() const {
     throw ConfigError("triaxial.sample_strain", "must lie in (0, axial_strain]");
   // A row holds 27 numbers: more than a few million rows is memory, not resolution.
   if (sample_steps < 0) throw ConfigError("triaxial.sample_steps", "must be >= 0 (0: sample by strain)");
-  if (sample_steps > 0 && !step_forecast().exceeds() && shear_steps() / static_cast<double>(sample_steps) > 2e6)
-    throw ConfigError("triaxial.sample_steps", "gives " + fmt(shear_steps() / static_cast<double>(sample_steps)) +
-                                                   " series rows over the shear (" + fmt(shear_steps()) +
-                                                   " steps); at least " + fmt(std::ceil(shear_steps() / 2e6)));
+  if (sample_steps > 0 && !step_forecast().exceeds()) {
+    const double steps = shear_steps();
+    if (steps / static_cast<double>(sample_steps) > 2e6)
+      throw ConfigError("triaxial.sample_steps", "gives " + fmt(steps / static_cast<double>(sample_steps)) +
+                                                     " series rows over the shear (" + fmt(steps) + " steps); at least " +
+                                                     fmt(std::ceil(steps / 2e6)));
+  }
   if (!(shear_ramp_strain >= 0.0 && shear_ramp_strain < 0.5 * axial_strain))
     throw ConfigError("triaxial.shear_ramp_strain", "must lie in [0, axial_strain / 2)");
   if (!(cv_from >= 0.0 && cv_to > cv_from)) throw ConfigError("triaxial.cv_window", "needs 0 <= from < to");

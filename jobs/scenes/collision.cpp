@@ -35,6 +35,12 @@ std::vector<ParamSpec> collision_params() {
   return p;
 }
 
+// A run that may go past the critical step is there to show the energy it gains: no
+// guard unless the job gives one.
+double energy_guard_of(const nlohmann::json& p) {
+  return p.value("energy_guard", p.at("allow_unstable_dt").get<bool>() ? -1.0 : engine::CollisionConfig{}.energy_guard);
+}
+
 engine::CollisionConfig config_from(const nlohmann::json& p) {
   engine::CollisionConfig c;
   c.material = material_from(p);
@@ -48,7 +54,7 @@ engine::CollisionConfig config_from(const nlohmann::json& p) {
   if (p.contains("dt_factor")) c.dt_factor = p.at("dt_factor").get<double>();
   c.keep_friction = p.at("keep_friction").get<bool>();
   c.allow_unstable_dt = p.at("allow_unstable_dt").get<bool>();
-  c.energy_guard = p.value("energy_guard", c.allow_unstable_dt ? -1.0 : c.energy_guard);  // as resolve() fills it
+  c.energy_guard = energy_guard_of(p);
   c.seed = p.at("seed").get<std::uint64_t>();
   return c;
 }
@@ -65,9 +71,7 @@ std::int64_t default_steps(const std::string& fidelity) {
 
 void resolve(nlohmann::json& p, const std::string& fidelity) {
   resolve_time_step(p, kSection, engine::CollisionConfig{}.dt_factor);
-  // A run that may go past the critical step is there to show the energy it gains.
-  if (!p.contains("energy_guard"))
-    p["energy_guard"] = p.at("allow_unstable_dt").get<bool>() ? -1.0 : engine::CollisionConfig{}.energy_guard;
+  p["energy_guard"] = energy_guard_of(p);
   if (p.contains("duration")) {
     // The engine derives steps and sampling from the duration and dt.
     for (const char* k : {"steps", "sample_every"})

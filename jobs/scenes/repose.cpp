@@ -19,11 +19,7 @@ const char* const kSection = "repose";
 // (2026-11-27; CPU time over steps and the grains grain_estimate() counts): 95 ns per
 // grain-step for the quick preset's ~420 grains, 132 for the standard preset's
 // ~5,400, interpolated in log N. A yardstick, not a promise for another machine.
-double ns_per_grain_step(double grains) {
-  const double x0 = std::log10(420.0), x1 = std::log10(5400.0), y0 = 95.0, y1 = 132.0;
-  const double g = std::clamp(std::log10(std::max(grains, 1.0)), x0, x1);
-  return y0 + (y1 - y0) * (g - x0) / (x1 - x0);
-}
+double ns_per_grain_step(double grains) { return ns_per_grain_step_at({{420.0, 95.0}, {5400.0, 132.0}}, grains); }
 
 std::vector<ParamSpec> repose_params() {
   std::vector<ParamSpec> p = material_params();
@@ -190,14 +186,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
 // The settings that leave a check no room, said before the run (the job may mean it).
 std::string advice(const nlohmann::json& p) {
   const engine::ReposeConfig c = config_from(p);
-  const double room = c.min_collapse_time + c.rest_profile_window;
-  if (c.rest_profile_window <= 0.0 || c.time_limit >= room) return "";
+  if (!c.profile_check_has_no_room()) return "";
   std::ostringstream os;
   os << "repose.time_limit " << c.time_limit << " s leaves the rest-by-profile check no room (its "
      << c.rest_profile_window << " s window after repose.min_collapse_time " << c.min_collapse_time
      << " s): a heap whose rattlers keep the kinetic energy above the threshold will fail not_settled; raise "
         "repose.time_limit above "
-     << room << " s, or set repose.rest_profile_window to 0 to do without the check";
+     << c.profile_check_time() << " s, or set repose.rest_profile_window to 0 to do without the check";
   return os.str();
 }
 

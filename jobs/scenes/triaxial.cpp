@@ -251,10 +251,7 @@ std::string advice(const nlohmann::json& p) {
 // grain-step at 500 grains, 73 at 2,000, 99 at 10,000 (larger samples leave the
 // caches), interpolated in log N. A yardstick, not a promise for another machine.
 double ns_per_grain_step(double grains) {
-  const double x[] = {std::log10(500.0), std::log10(2000.0), std::log10(10000.0)}, y[] = {62.0, 73.0, 99.0};
-  const double g = std::clamp(std::log10(std::max(grains, 1.0)), x[0], x[2]);
-  const int k = g <= x[1] ? 0 : 1;
-  return y[k] + (y[k + 1] - y[k]) * (g - x[k]) / (x[k + 1] - x[k]);
+  return ns_per_grain_step_at({{500.0, 62.0}, {2000.0, 73.0}, {10000.0, 99.0}}, grains);
 }
 
 }  // namespace
