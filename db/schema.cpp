@@ -129,6 +129,11 @@ void check_file(const std::string& path) {
   if (file_is_empty_or_missing(path)) return;
   check_header(path);
   Connection c(path, /*read_only=*/true);
+  // One read transaction, so that every read below sees the same snapshot: a runner
+  // creating this file commits its tables, version and application id together, and
+  // reading them one statement at a time could see the tables without the id (a
+  // "foreign" database) while the two runners of Runner.TwoRunnersOfOneJob* raced.
+  c.exec("BEGIN");
   try {
     Statement qc = c.prepare("PRAGMA quick_check");
     if (!qc.step() || qc.text(0) != "ok")
@@ -147,6 +152,7 @@ void check_file(const std::string& path) {
                       std::to_string(kSchemaVersion) + "); upgrade demcal",
                   true);
   require_tables(c, path, version, tables);
+  c.exec("COMMIT");
 }
 
 void migrate(Connection& c) {
