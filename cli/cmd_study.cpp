@@ -6,7 +6,7 @@
 #include "jobs/folder_lock.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/runner.hpp"
-#include "jobs/study.hpp"
+#include "calibrate/study.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -46,9 +46,9 @@ std::pair<std::string, double> parse_reference(const std::string& text) {
   }
 }
 
-int fidelity(const StudyArgs& a, const jobs::StudyOptions& o) {
+int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
   db::Store store(a.db);
-  const jobs::FidelityStudy s = jobs::run_fidelity_study(store, a.name, o);
+  const calibrate::FidelityStudy s = calibrate::run_fidelity_study(store, a.name, o);
   std::cout << "study " << s.name << " (" << s.scene << "), baseline " << s.baseline << "; " << s.replicas
             << " replica(s) per setting\n";
   for (const auto& f : s.job_files) std::cout << "job file " << f << "\n";
@@ -84,13 +84,13 @@ int fidelity(const StudyArgs& a, const jobs::StudyOptions& o) {
 }
 
 int study(const StudyArgs& a) {
-  const auto& names = jobs::study_names();
+  const auto& names = calibrate::study_names();
   if (std::find(names.begin(), names.end(), a.name) == names.end()) {
     std::string all;
     for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
     throw jobs::JobError("study", "unknown study \"" + a.name + "\" (expected one of: " + all + ")");
   }
-  jobs::StudyOptions o;
+  calibrate::StudyOptions o;
   o.out_dir = a.out.empty() ? default_out_dir(a.db) + "/study-" + a.name : a.out;
   o.quick = a.quick;
   o.workers = a.workers;
@@ -105,7 +105,7 @@ int study(const StudyArgs& a) {
     for (const auto& r : a.references)
       if (!o.reference.insert(parse_reference(r)).second)
         throw jobs::JobError("--reference", "\"" + r + "\": a second reference for the same knob; give one");
-    jobs::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
+    calibrate::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
   }
   const std::string flag = a.out.empty() ? "--db" : "--out";
   require_writable_dir(flag, o.out_dir);  // before the database is written
@@ -125,7 +125,7 @@ int study(const StudyArgs& a) {
   if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {
-    const jobs::GrazingStudy s = jobs::run_grazing_study(o);
+    const calibrate::GrazingStudy s = calibrate::run_grazing_study(o);
     std::cout << "grazing impact, theta 30 deg, eta 0.1, b 1, no damping: " << s.rows.size() << " impacts\n"
               << "largest energy ratio - 1: " << s.worst_gain << " (" << s.worst_where << ")"
               << (s.worst_gain > 0 ? ": the integrator's head-on error, see docs/studies.md" : ": no energy gained")
@@ -134,7 +134,7 @@ int study(const StudyArgs& a) {
     return kOk;
   }
   db::Store store(a.db);
-  const jobs::TimestepStudy s = jobs::run_timestep_study(store, o);
+  const calibrate::TimestepStudy s = calibrate::run_timestep_study(store, o);
   std::cout << "job " << s.job << " in " << a.db << ": " << s.tasks << " tasks (" << s.reused << " reused, " << s.ran
             << " run now)\n";
   std::cout << "series           dt_factor  status    drift/sim-s (worst)  mean +- sd of replicas   wall-s/sim-s  pareto\n";

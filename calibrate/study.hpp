@@ -1,5 +1,6 @@
 #pragma once
-// Speed-against-accuracy studies (issue 9): `demcal study timestep|grazing|fidelity|repose-fidelity`.
+// Speed-against-accuracy studies (issue 9; one file each: timestep_study.cpp,
+// grazing_study.cpp, fidelity_study.cpp): `demcal study timestep|grazing|fidelity|repose-fidelity`.
 //
 // timestep: the seed's Fig. 2.6 collision test as a job over a grid of dt factors,
 // frictionless and with friction + rolling resistance, run by the normal runner
@@ -19,7 +20,7 @@
 // one), replica spread, wall time; a chart of error against wall time (Pareto
 // front and failed tasks marked) and the cheapest setting within the tolerance.
 #include "db/store.hpp"
-#include "query.hpp"
+#include "jobs/query.hpp"
 
 #include <cmath>
 #include <map>
@@ -27,7 +28,9 @@
 #include <string>
 #include <vector>
 
-namespace demcal::jobs {
+namespace demcal::calibrate {
+
+using jobs::ResultRow;
 
 struct StudyOptions {
   std::string out_dir;        // charts and CSV go here (created)
@@ -143,6 +146,9 @@ void check_fidelity_options(const std::string& name, const StudyOptions& options
 FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, const StudyOptions& options);
 
 // The studies `demcal study` knows, for help texts and errors.
-const std::vector<std::string>& study_names();
+inline const std::vector<std::string>& study_names() {
+  static const std::vector<std::string> names = {"timestep", "grazing", "fidelity", "repose-fidelity"};
+  return names;
+}
 
-}  // namespace demcal::jobs
+}  // namespace demcal::calibrate

@@ -1,0 +1,35 @@
+#pragma once
+// What the study files share: checked writes of their tables and charts, a stored
+// metric by name, and numbers as the charts and advice print them.
+#include "jobs/query.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace demcal::calibrate::study_support {
+
+// A study's tables, advice and job files are its result: a write that fails (disk
+// full, a folder or a device in the way) is an error, not a "wrote" line.
+inline void close_checked(std::ofstream& f, const std::string& path) {
+  f.close();
+  if (!f) throw std::runtime_error("cannot write " + path + " (disk full, or not a writable file)");
+}
+
+
+inline double metric(const jobs::ResultRow& r, const std::string& name) {
+  for (const auto& [k, v] : r.metrics)
+    if (k == name) return v;
+  return NAN;
+}
+
+inline std::string fmt(double v, int prec = 3) {
+  std::ostringstream os;
+  os << std::setprecision(prec) << v;
+  return os.str();
+}
+
+}  // namespace demcal::calibrate::study_support
