@@ -302,10 +302,31 @@ Metrics ReposeResult::metrics() const {
   return m;
 }
 
-ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
-  cfg.validate();
-  const RunClock clock;
-  ReposeResult res;
+namespace {
+
+// Sizes every stage uses, worked out once from the config.
+struct ReposeSizes {
+  double d_mean, v_mean, m_mean;  // mean diameter, grain volume and mass
+  double W, H, Ly, L;             // column width and height, slab depth, domain length [m]
+  double g, bin;                  // gravity [m/s^2], profile bin [m]
+};
+
+ReposeSizes sizes_of(const ReposeConfig& cfg) {
+  const Material& mat = cfg.material;
+  ReposeSizes z;
+  z.d_mean = mat.grading().mean();
+  z.v_mean = kPi / 6.0 * mat.grading().mean_cube();
+  z.m_mean = mat.density * z.v_mean;
+  z.W = cfg.column_width;
+  z.H = cfg.column_height;
+  z.Ly = cfg.slab_depth_diameters * z.d_mean;
+  z.L = domain_length_of(cfg);
+  z.g = cfg.gravity;
+  z.bin = cfg.bin_width > 0.0 ? cfg.bin_width : z.d_mean;
+  return z;
+}
+
+void name_series(ReposeResult& res) {
   res.energy.name = "energy";
   res.energy.columns = {"time", "kinetic", "ke_per_grain", "ke_flow_per_grain", "front_x", "repose_deg"};
   res.energy.units = {"s", "J", "J", "J", "m", "deg"};
@@ -315,37 +336,419 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   res.profile.name = "profile";
   res.profile.columns = {"x", "h", "count"};
   res.profile.units = {"m", "m", "1"};
+}
+
+std::string describe_boundaries(const ReposeConfig& cfg, const ReposeSizes& z) {
+  std::ostringstream os;
+  if (cfg.side_walls == SideWalls::periodic)
+    os << "slab periodic in y (depth " << z.Ly << " m, no side walls)";
+  else
+    os << "slab of depth " << z.Ly << " m between " << to_string(cfg.side_walls) << " side walls y = 0 and y = "
+       << z.Ly << (cfg.side_walls == SideWalls::frictional ? " (the grains' theta and eta)" : "");
+  os << "; smooth back wall x = 0; smooth gate x = " << z.W
+     << " (removed at collapse); smooth end wall x = " << z.L << "; floor: fixed grains (same size distribution) on a"
+     << " rough plane z = 0";
+  return os.str();
+}
+
+// One layer of fixed grains on a jittered square grid resting on z = 0; each grain
+// stays inside its cell.
+struct Floor {
+  Particles grains;
+  double level = 0.0;  // mean grain diameter: the height profiles are measured from
+  double top = 0.0;    // the largest
+};
+
+Floor lay_floor(const ReposeConfig& cfg, std::mt19937_64& rng) {
+  const Material& mat = cfg.material;
+  const FloorGrid grid = floor_grid(cfg);
+  const int nx = grid.nx, ny = grid.ny;
+  const double sx = grid.sx, sy = grid.sy;
+  Floor fl;
+  auto lay = [&](auto draw_diameter) {
+    for (int ix = 0; ix < nx; ++ix)
+      for (int iy = 0; iy < ny; ++iy) {
+        const double r = 0.5 * draw_diameter();
+        const double jx = (0.5 * sx - r) * uniform(rng, -1.0, 1.0);
+        const double jy = (0.5 * sy - r) * uniform(rng, -1.0, 1.0);
+        fl.grains.add(Vec3((ix + 0.5) * sx + jx, (iy + 0.5) * sy + jy, r), r, mat.density, true);
+      }
+  };
+  // The default inlines its draw into the jitter's arithmetic, where GCC contracts
+  // the two into FMAs: the floors of stored results were laid that way, and a draw
+  // through Grading (or a branch between the two) rounds differently.
+  if (mat.size_distribution == SizeDistribution::uniform)
+    lay([&] { return uniform(rng, mat.d_min, mat.d_max); });
+  else {
+    const Grading grading = mat.grading();
+    const Grading::Sampler draw(grading);
+    lay([&] { return draw(rng); });
+  }
+  for (std::size_t i = 0; i < fl.grains.size(); ++i) {
+    fl.level += 2.0 * fl.grains.r[i];
+    fl.top = std::max(fl.top, 2.0 * fl.grains.r[i]);
+  }
+  fl.level /= static_cast<double>(fl.grains.size());
+  return fl;
+}
+
+// The column's grains inserted at random in a tall region behind the gate, above
+// the floor's grains there (which come first, fixed).
+struct Fill {
+  Particles grains;
+  std::size_t n_floor = 0;
+  double z0 = 0.0, height = 0.0;  // the region's bottom and height [m]
+};
+
+Fill fill_column(const ReposeConfig& cfg, const ReposeSizes& z, const Floor& floor, std::mt19937_64& rng) {
+  const Material& mat = cfg.material;
+  const double target_vs = cfg.target_solid_fraction * z.W * z.H * z.Ly;
+  const std::size_t n_grains = static_cast<std::size_t>(std::ceil(cfg.overfill * target_vs / z.v_mean));
+  std::vector<double> radii = sample_radii(n_grains, mat.grading(), rng);
+  double vs = 0.0;
+  for (double r : radii) vs += sphere_volume(r);
+  Fill f;
+  f.z0 = floor.top + 0.05 * mat.d_min;
+  f.height = vs / (cfg.fill_solid_fraction * z.W * z.Ly);
+  for (std::size_t i = 0; i < floor.grains.size(); ++i)
+    if (floor.grains.x[i][0] < z.W) f.grains.add(floor.grains.x[i], floor.grains.r[i], mat.density, true);
+  f.n_floor = f.grains.size();
+  const bool periodic_y = cfg.side_walls == SideWalls::periodic;
+  insert_random(f.grains, radii, Vec3(0.0, 0.0, f.z0), Vec3(z.W, z.Ly, f.z0 + f.height), mat.density, rng,
+                {false, periodic_y, false});
+  return f;
+}
+
+WorldOptions world_options(const ReposeConfig& cfg, const ContactParams& law, const Fill& fill) {
+  double m_min = 1e300;
+  for (std::size_t i = fill.n_floor; i < fill.grains.size(); ++i) m_min = std::min(m_min, fill.grains.m[i]);
+  WorldOptions opt;
+  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, law.kn);
+  opt.gravity = Vec3(0.0, 0.0, -cfg.gravity);
+  opt.threads = cfg.threads;
+  opt.local_damping = cfg.prep_damping;
+  return opt;
+}
+
+struct ReposeWalls {
+  Wall floor, back, gate, end;
+  std::vector<Wall> side;  // none for a periodic slab
+  std::vector<Wall> with_sides(std::vector<Wall> w) const {
+    w.insert(w.end(), side.begin(), side.end());
+    return w;
+  }
+};
+
+ReposeWalls repose_walls(const ReposeConfig& cfg, const ReposeSizes& z) {
+  ReposeWalls rw{make_wall("floor", Vec3::Zero(), Vec3::UnitZ(), true),
+                 make_wall("back", Vec3::Zero(), Vec3::UnitX(), false),
+                 make_wall("gate", Vec3(z.W, 0.0, 0.0), -Vec3::UnitX(), false),
+                 make_wall("end", Vec3(z.L, 0.0, 0.0), -Vec3::UnitX(), false),
+                 {}};
+  if (cfg.side_walls != SideWalls::periodic) {
+    const bool rough = cfg.side_walls == SideWalls::frictional;
+    rw.side.push_back(make_wall("side_y0", Vec3::Zero(), Vec3::UnitY(), rough));
+    rw.side.push_back(make_wall("side_y1", Vec3(0.0, z.Ly, 0.0), -Vec3::UnitY(), rough));
+  }
+  return rw;
+}
+
+// What the stages share: the stage under way (named in a failure), the steps and
+// the preparation's clock.
+struct ReposeRun {
+  const ReposeConfig& cfg;
+  Observer* obs;
+  ReposeResult& res;
+  std::size_t n_floor_prep;  // fixed floor grains behind the gate, first in the preparation's worlds
+  double ke_unit;            // m_mean * g * d_mean [J]
+  std::string stage = "fill";
+  long steps_total = 0;
+  double prep_clock = 0.0;
+
+  // Damped settling until the flow's kinetic energy per grain falls below its
+  // threshold (after min_time); the time it took.
+  double settle(World& w, double min_time, const char* name) {
+    stage = name;
+    if (obs) obs->on_stage(name);
+    const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
+    const long n_mobile = static_cast<long>(w.particles().size() - n_floor_prep);
+    const double t0 = w.time();
+    std::vector<Vec3> prev = w.particles().x;
+    std::vector<double> scratch;
+    while (true) {
+      w.run(chunk);
+      steps_total += chunk;
+      const double t = w.time() - t0;
+      const double ke_all = kinetic_energy(w.particles()) / static_cast<double>(std::max(1L, n_mobile));
+      const double ke = flow_ke_per_grain(w.particles(), w.domain(), prev, chunk * w.dt(), cfg.rest_trim, scratch);
+      res.prep.add({prep_clock + t, ke_all, ke}, nullptr);
+      if (t >= min_time && ke < cfg.settle_ke_ratio * ke_unit) break;
+      if (t > cfg.settle_time_limit) throw std::runtime_error(not_settled(w, name, t, ke));
+    }
+    prep_clock += w.time() - t0;
+    return w.time() - t0;
+  }
+
+  std::string not_settled(const World& w, const char* name, double t, double ke) const {
+    std::ostringstream os;
+    const Particles& pp = w.particles();
+    std::size_t fast = 0;
+    for (std::size_t i = 0; i < pp.size(); ++i)
+      if (pp.v[i].squaredNorm() > pp.v[fast].squaredNorm()) fast = i;
+    os << "column preparation (" << name << ") not at rest after " << t << " s: kinetic energy per grain " << ke
+       << " J, threshold " << cfg.settle_ke_ratio * ke_unit << " J; fastest grain at (" << pp.x[fast].transpose()
+       << ") m moves at " << pp.v[fast].norm() << " m/s";
+    return os.str();
+  }
+};
+
+// The settled column with every grain whose top is above the target height
+// removed, at rest; `kept` counts the mobile grains left.
+Particles level_column(const World& settled, double top_limit, long& kept) {
+  Particles lev = settled.particles();
+  std::vector<std::uint8_t> drop(lev.size(), 0);
+  kept = 0;
+  for (std::size_t i = 0; i < lev.size(); ++i) {
+    lev.v[i].setZero();
+    lev.w[i].setZero();
+    if (lev.fixed[i]) continue;
+    drop[i] = lev.x[i][2] + lev.r[i] > top_limit ? 1 : 0;
+    kept += drop[i] ? 0 : 1;
+  }
+  lev.remove_if(drop);
+  return lev;
+}
+
+// The column as prepared: its height, aspect ratio and solid fraction.
+void record_column(const Particles& pc, double floor_level, const ReposeSizes& z, ReposeResult& res) {
+  double top = 0.0, vcol = 0.0;
+  for (std::size_t i = 0; i < pc.size(); ++i) {
+    if (pc.fixed[i]) continue;
+    top = std::max(top, pc.x[i][2] + pc.r[i]);
+    vcol += sphere_volume(pc.r[i]);
+  }
+  res.column_height = top - floor_level;
+  res.aspect_ratio = res.column_height / z.W;
+  res.column_solid_fraction = vcol / (z.W * z.Ly * res.column_height);
+  if (res.column_height < 0.97 * z.H) {
+    std::ostringstream os;
+    os << "column settled to " << res.column_height << " m, below the target " << z.H
+       << " m: raise overfill or lower target_solid_fraction";
+    res.outcome.warnings.push_back(os.str());
+  }
+}
+
+// The whole floor (fixed) and the column's grains (free), for the collapse.
+Particles collapse_grains(const Floor& floor, const Particles& column, double density) {
+  Particles all;
+  for (std::size_t i = 0; i < floor.grains.size(); ++i) all.add(floor.grains.x[i], floor.grains.r[i], density, true);
+  for (std::size_t i = 0; i < column.size(); ++i)
+    if (!column.fixed[i]) all.add(column.x[i], column.r[i], density, false);
+  return all;
+}
+
+// Where the deposit ends and the heap's slope as the final measurement would read them.
+struct HeapReader {
+  const ReposeConfig& cfg;
+  const ReposeSizes& z;
+  const std::vector<std::uint8_t>& mobile;
+  double floor_level;
+  int gap_bins;
+
+  SurfaceProfile profile(const Particles& p) const {
+    return surface_profile(p.x, p.r, &mobile, 0.0, z.L, z.bin, floor_level);
+  }
+  Front front(const SurfaceProfile& prof, const Particles& p) const {
+    return deposit_front(prof, 0, cfg.front_min_height * z.d_mean, gap_bins, &p.x, &p.r, &mobile);
+  }
+  // Front x and angle now (NaN angle: no fit yet).
+  std::pair<double, double> now(const Particles& p) const {
+    const SurfaceProfile prof = profile(p);
+    const Front fr = front(prof, p);
+    const SlopeFit fit = fit_heap(prof, fr, cfg.fit_lo, cfg.fit_hi);
+    return {fr.x, fit.ok ? fit.angle_deg : NAN};
+  }
+};
+
+// Runs the collapse until the flow's kinetic energy stays below the rest threshold
+// for rest_samples samples (true) or the time limit (false).
+bool collapse_to_rest(ReposeRun& run, World& w, const HeapReader& heap, long chunk) {
+  const ReposeConfig& cfg = run.cfg;
+  ReposeResult& res = run.res;
+  const double n_mobile = static_cast<double>(res.particles);
+  std::vector<Vec3> x_prev = w.particles().x;
+  std::vector<double> scratch;
+  auto sample = [&]() {
+    const Particles& p = w.particles();
+    const double ke = kinetic_energy(p);
+    const double ke_flow = flow_ke_per_grain(p, w.domain(), x_prev, chunk * w.dt(), cfg.rest_trim, scratch);
+    const auto [front_x, angle] = heap.now(p);
+    res.energy.add({w.time(), ke, ke / n_mobile, ke_flow, front_x, angle}, run.obs);
+    return ke_flow;
+  };
+  w.refresh();
+  sample();
+  if (run.obs) run.obs->on_snapshot("column", w.time(), w.particles());
+  int quiet = 0;
+  const long drag_every = 100;
+  const double drag_factor = std::exp(-cfg.collapse_drag * drag_every * w.dt());
+  while (true) {
+    if (cfg.collapse_drag > 0.0) {
+      for (long done = 0; done < chunk;) {
+        const long k = std::min(drag_every, chunk - done);
+        w.run(k);
+        done += k;
+        Particles& pm = w.particles();
+        const double f = k == drag_every ? drag_factor : std::exp(-cfg.collapse_drag * k * w.dt());
+        for (std::size_t i = 0; i < pm.size(); ++i)
+          if (!pm.fixed[i]) {
+            pm.v[i] *= f;
+            pm.w[i] *= f;
+          }
+      }
+    } else {
+      w.run(chunk);
+    }
+    run.steps_total += chunk;
+    const double ke = sample();
+    const double t = w.time();
+    quiet = ke < res.rest_ke_J ? quiet + 1 : 0;
+    if (run.obs) run.obs->on_progress(0.25 + 0.75 * std::min(1.0, t / cfg.time_limit));
+    if (t >= cfg.min_collapse_time && quiet >= cfg.rest_samples) return true;
+    if (t >= cfg.time_limit) return false;
+  }
+}
+
+// A heap whose kinetic energy never fell below the threshold may still be at rest
+// by its profile (rattlers keep the energy up): judged over the last
+// rest_profile_window of the energy series. The note says what was seen.
+std::string judge_by_profile(const ReposeConfig& cfg, double time_now, double bin, HeapStillness& still,
+                             ReposeResult& res) {
+  const auto col = [&](const char* name) {
+    const std::size_t c = res.energy.column(name);
+    std::vector<double> v;
+    for (const auto& row : res.energy.rows) v.push_back(row[c]);
+    return v;
+  };
+  still = heap_stillness(col("time"), col("front_x"), col("repose_deg"), time_now - cfg.rest_profile_window,
+                         cfg.min_collapse_time);
+  std::ostringstream note;
+  if (still.judged) {
+    res.profile_angle_change_deg = still.angle_change_deg;
+    res.profile_front_change_m = still.front_change_m;
+    res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
+    note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by " << still.angle_change_deg
+         << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by " << still.front_change_m
+         << " m (the spread of its lowest value in each sixth of the window; tolerance one bin, " << bin << " m)";
+    if (still.front_excursion_m > still.front_change_m + 1e-12)
+      note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";
+  } else {
+    note << "the heap's profile was not judged: " << still.why;
+    if (cfg.profile_check_has_no_room())
+      note << " (repose.time_limit " << cfg.time_limit << " s leaves no room for the " << cfg.rest_profile_window
+           << " s window after repose.min_collapse_time " << cfg.min_collapse_time << " s: raise it above "
+           << cfg.profile_check_time() << " s for the check to run)";
+  }
+  return note.str();
+}
+
+// The deposit's front, runout, slope fit (whole, upper and lower half) and steepest
+// local angle from the final profile.
+void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapReader& heap, const Particles& p,
+                     const SurfaceProfile& prof, ReposeResult& res) {
+  const Front front = heap.front(prof, p);
+  const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
+  if (front.bin >= 0)  // no front, no deposit to be beyond
+    for (std::size_t i = 0; i < p.size(); ++i)
+      if (heap.mobile[i] && p.x[i][0] - p.r[i] > front.x) ++res.grains_beyond_front;
+  res.final_height_m = fit.h_max;
+  res.front_m = front.x;
+  res.runout_m = front.x - z.W;
+  res.runout_ratio = res.runout_m / z.W;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (heap.mobile[i] && p.x[i][0] + p.r[i] > z.L - 0.5 * cfg.material.d_min) res.reached_end_wall = true;
+  if (res.reached_end_wall) res.outcome.warnings.push_back("grains reached the end wall: runout is bounded by domain_length");
+  if (!fit.ok) {
+    res.repose_deg = NAN;
+    res.outcome.warnings.push_back("no angle of repose: " + fit.why);
+    return;
+  }
+  res.repose_deg = fit.angle_deg;
+  res.repose_fit_err_deg = fit.angle_err_deg;
+  res.fit_points = fit.points;
+  res.repose_upper_deg = fit.upper_angle_deg;
+  res.repose_lower_deg = fit.lower_angle_deg;
+  res.fit_slope = fit.slope;
+  res.fit_intercept = fit.intercept;
+  res.fit_x_upper = fit.x_upper;
+  res.fit_x_lower = fit.x_lower;
+  const double win = cfg.steep_window > 0.0 ? cfg.steep_window : 5.0 * z.d_mean;
+  const int wbins = std::max(2, static_cast<int>(std::lround(win / z.bin)));
+  res.steepest_deg = steepest_angle_deg(prof.x, prof.h, fit.x_upper, fit.x_lower, wbins);
+}
+
+// The final state: profile, whether the heap is at rest (by energy, else by its
+// profile), and if so its measurements; else the run is not_settled, saying why.
+void finish_collapse(const ReposeConfig& cfg, const ReposeSizes& z, const World& w, const HeapReader& heap, bool at_rest,
+                     long chunk, ReposeResult& res) {
+  const Particles& p = w.particles();
+  // Reported even when not settled, for inspection.
+  const SurfaceProfile prof = heap.profile(p);
+  for (std::size_t b = 0; b < prof.x.size(); ++b)
+    res.profile.add({prof.x[b], prof.h[b], static_cast<double>(prof.count[b])}, nullptr);
+
+  std::string not_at_rest, profile_note;
+  HeapStillness still;
+  if (!at_rest) {
+    std::ostringstream os;
+    os << "flow kinetic energy per grain up to " << recent_flow_ke(res.energy, cfg.rest_samples) << " J over the last "
+       << cfg.rest_samples << " samples, threshold " << res.rest_ke_J << " J"
+       << few_grains_moving(p, heap.mobile, heap.floor_level, res.energy.rows.back()[res.energy.column("front_x")],
+                            z.d_mean);
+    not_at_rest = os.str();
+    if (cfg.rest_profile_window > 0.0) profile_note = judge_by_profile(cfg, w.time(), z.bin, still, res);
+  }
+  if (!at_rest && !res.rest_by_profile) {
+    std::ostringstream os;
+    os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit << " s): " << not_at_rest;
+    if (!profile_note.empty()) os << "; " << profile_note;
+    res.outcome.status = SceneStatus::not_settled;
+    res.outcome.failed_stage = "collapse";
+    res.outcome.message = os.str();
+    return;
+  }
+  if (res.rest_by_profile) {
+    res.time_to_rest_s = still.since;  // still since at least then
+    std::ostringstream os;
+    os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
+       << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start";
+    res.outcome.warnings.push_back(os.str());
+  } else {
+    res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
+  }
+  measure_deposit(cfg, z, heap, p, prof, res);
+}
+
+}  // namespace
+
+ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
+  cfg.validate();
+  const RunClock clock;
+  ReposeResult res;
+  name_series(res);
   res.threads = cfg.threads;
 
   const Material& mat = cfg.material;
-  const double d_mean = mat.grading().mean();
-  const double v_mean = kPi / 6.0 * mat.grading().mean_cube();
-  const double m_mean = mat.density * v_mean;
-  const double W = cfg.column_width, H = cfg.column_height;
-  const double Ly = cfg.slab_depth_diameters * d_mean;
-  const double L = domain_length_of(cfg);
-  const double g = cfg.gravity;
-  const double bin = cfg.bin_width > 0.0 ? cfg.bin_width : d_mean;
-  res.column_width = W;
-  res.slab_depth_m = Ly;
-  res.domain_length = L;
-  res.bin_width = bin;
+  const ReposeSizes z = sizes_of(cfg);
+  res.column_width = z.W;
+  res.slab_depth_m = z.Ly;
+  res.domain_length = z.L;
+  res.bin_width = z.bin;
   res.stiffness_scale = cfg.stiffness_scale;
   res.prep_damping = cfg.prep_damping;
   res.collapse_drag = cfg.collapse_drag;
-  res.rest_ke_J = cfg.rest_ke_ratio * m_mean * g * d_mean;
-  {
-    std::ostringstream os;
-    if (cfg.side_walls == SideWalls::periodic)
-      os << "slab periodic in y (depth " << Ly << " m, no side walls)";
-    else
-      os << "slab of depth " << Ly << " m between " << to_string(cfg.side_walls) << " side walls y = 0 and y = " << Ly
-         << (cfg.side_walls == SideWalls::frictional ? " (the grains' theta and eta)" : "");
-    os << "; smooth back wall x = 0; smooth gate x = " << W
-       << " (removed at collapse); smooth end wall x = " << L << "; floor: fixed grains (same size distribution) on a"
-       << " rough plane z = 0";
-    res.boundaries = os.str();
-  }
+  res.rest_ke_J = cfg.rest_ke_ratio * z.m_mean * z.g * z.d_mean;
+  res.boundaries = describe_boundaries(cfg, z);
 
   Material law_mat = mat;
   law_mat.kn *= cfg.stiffness_scale;
@@ -355,350 +758,71 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   res.ks = law.ks;
 
   std::mt19937_64 rng(cfg.seed);
-
-  // Floor: one layer of fixed grains on a jittered square grid resting on z = 0;
-  // each grain stays inside its cell.
-  const FloorGrid grid = floor_grid(cfg);
-  const int nx = grid.nx, ny = grid.ny;
-  const double sx = grid.sx, sy = grid.sy;
-  Particles floor_all;
-  auto lay_floor = [&](auto draw_diameter) {
-    for (int ix = 0; ix < nx; ++ix)
-      for (int iy = 0; iy < ny; ++iy) {
-        const double r = 0.5 * draw_diameter();
-        const double jx = (0.5 * sx - r) * uniform(rng, -1.0, 1.0);
-        const double jy = (0.5 * sy - r) * uniform(rng, -1.0, 1.0);
-        floor_all.add(Vec3((ix + 0.5) * sx + jx, (iy + 0.5) * sy + jy, r), r, mat.density, true);
-      }
-  };
-  // The default inlines its draw into the jitter's arithmetic, where GCC contracts
-  // the two into FMAs: the floors of stored results were laid that way, and a draw
-  // through Grading (or a branch between the two) rounds differently.
-  if (mat.size_distribution == SizeDistribution::uniform)
-    lay_floor([&] { return uniform(rng, mat.d_min, mat.d_max); });
-  else {
-    const Grading grading = mat.grading();
-    const Grading::Sampler draw(grading);
-    lay_floor([&] { return draw(rng); });
-  }
-  double floor_level = 0.0, floor_top = 0.0;
-  for (std::size_t i = 0; i < floor_all.size(); ++i) {
-    floor_level += 2.0 * floor_all.r[i];
-    floor_top = std::max(floor_top, 2.0 * floor_all.r[i]);
-  }
-  floor_level /= static_cast<double>(floor_all.size());
-  res.floor_level = floor_level;
-  res.floor_particles = static_cast<long>(floor_all.size());
-
-  // Column grains: random insertion in a tall region behind the gate.
-  const double target_vs = cfg.target_solid_fraction * W * H * Ly;
-  const std::size_t n_grains = static_cast<std::size_t>(std::ceil(cfg.overfill * target_vs / v_mean));
-  std::vector<double> radii = sample_radii(n_grains, mat.grading(), rng);
-  double vs = 0.0;
-  for (double r : radii) vs += sphere_volume(r);
-  const double z0 = floor_top + 0.05 * mat.d_min;
-  const double fill_h = vs / (cfg.fill_solid_fraction * W * Ly);
-  Particles prep;
-  for (std::size_t i = 0; i < floor_all.size(); ++i)
-    if (floor_all.x[i][0] < W) prep.add(floor_all.x[i], floor_all.r[i], mat.density, true);
-  const std::size_t n_floor_prep = prep.size();
-  const bool periodic_y = cfg.side_walls == SideWalls::periodic;
-  insert_random(prep, radii, Vec3(0.0, 0.0, z0), Vec3(W, Ly, z0 + fill_h), mat.density, rng, {false, periodic_y, false});
-
-  double m_min = 1e300;
-  for (std::size_t i = n_floor_prep; i < prep.size(); ++i) m_min = std::min(m_min, prep.m[i]);
-  WorldOptions opt;
-  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, law.kn);
-  opt.gravity = Vec3(0.0, 0.0, -g);
-  opt.threads = cfg.threads;
-  opt.local_damping = cfg.prep_damping;
+  const Floor floor = lay_floor(cfg, rng);
+  res.floor_level = floor.level;
+  res.floor_particles = static_cast<long>(floor.grains.size());
+  Fill fill = fill_column(cfg, z, floor, rng);
+  const WorldOptions opt = world_options(cfg, law, fill);
   res.dt = opt.dt;
 
   Domain dom;
   dom.lo = Vec3(0.0, 0.0, 0.0);
-  dom.hi = Vec3(L, Ly, z0 + fill_h + H);
-  dom.periodic = {false, periodic_y, false};
+  dom.hi = Vec3(z.L, z.Ly, fill.z0 + fill.height + z.H);
+  dom.periodic = {false, cfg.side_walls == SideWalls::periodic, false};
+  const ReposeWalls rw = repose_walls(cfg, z);
 
-  const Wall floor_wall = make_wall("floor", Vec3::Zero(), Vec3::UnitZ(), true);
-  const Wall back_wall = make_wall("back", Vec3::Zero(), Vec3::UnitX(), false);
-  const Wall gate_wall = make_wall("gate", Vec3(W, 0.0, 0.0), -Vec3::UnitX(), false);
-  const Wall end_wall = make_wall("end", Vec3(L, 0.0, 0.0), -Vec3::UnitX(), false);
-  std::vector<Wall> side;
-  if (!periodic_y) {
-    const bool rough = cfg.side_walls == SideWalls::frictional;
-    side.push_back(make_wall("side_y0", Vec3::Zero(), Vec3::UnitY(), rough));
-    side.push_back(make_wall("side_y1", Vec3(0.0, Ly, 0.0), -Vec3::UnitY(), rough));
-  }
-  auto walls = [&side](std::vector<Wall> w) {
-    w.insert(w.end(), side.begin(), side.end());
-    return w;
-  };
-
-  long steps_total = 0;
-  const double ke_unit = m_mean * g * d_mean;
-  std::string stage = "fill";
-  double prep_clock = 0.0;
+  ReposeRun run{cfg, obs, res, fill.n_floor, z.m_mean * z.g * z.d_mean};
   try {
     // Preparation: damped settling behind the gate, levelling, settling again.
-    auto settle = [&](World& w, double min_time, const char* name) {
-      stage = name;
-      if (obs) obs->on_stage(name);
-      const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
-      const long n_mobile = static_cast<long>(w.particles().size() - n_floor_prep);
-      const double t0 = w.time();
-      std::vector<Vec3> prev = w.particles().x;
-      std::vector<double> scratch;
-      while (true) {
-        w.run(chunk);
-        steps_total += chunk;
-        const double t = w.time() - t0;
-        const double ke_all = kinetic_energy(w.particles()) / static_cast<double>(std::max(1L, n_mobile));
-        const double ke =
-            flow_ke_per_grain(w.particles(), w.domain(), prev, chunk * w.dt(), cfg.rest_trim, scratch);
-        res.prep.add({prep_clock + t, ke_all, ke}, nullptr);
-        if (t >= min_time && ke < cfg.settle_ke_ratio * ke_unit) break;
-        if (t > cfg.settle_time_limit) {
-          std::ostringstream os;
-          const Particles& pp = w.particles();
-          std::size_t fast = 0;
-          for (std::size_t i = 0; i < pp.size(); ++i)
-            if (pp.v[i].squaredNorm() > pp.v[fast].squaredNorm()) fast = i;
-          os << "column preparation (" << name << ") not at rest after " << t << " s: kinetic energy per grain "
-             << ke << " J, threshold " << cfg.settle_ke_ratio * ke_unit << " J; fastest grain at ("
-             << pp.x[fast].transpose() << ") m moves at " << pp.v[fast].norm() << " m/s";
-          throw std::runtime_error(os.str());
-        }
-      }
-      prep_clock += w.time() - t0;
-      return w.time() - t0;
-    };
-
-    World w1(std::move(prep), walls({floor_wall, back_wall, gate_wall}), dom, law, opt);
-    res.prep_time_s += settle(w1, std::sqrt(2.0 * fill_h / g), "settle");
+    World w1(std::move(fill.grains), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
+    res.prep_time_s += run.settle(w1, std::sqrt(2.0 * fill.height / z.g), "settle");
     if (obs) obs->on_progress(0.15);
 
-    // Level: remove grains whose top is above the target height.
-    stage = "level";
-    Particles lev = w1.particles();
-    std::vector<std::uint8_t> drop(lev.size(), 0);
+    run.stage = "level";
     long kept = 0;
-    for (std::size_t i = 0; i < lev.size(); ++i) {
-      lev.v[i].setZero();
-      lev.w[i].setZero();
-      if (lev.fixed[i]) continue;
-      drop[i] = lev.x[i][2] + lev.r[i] > floor_level + H ? 1 : 0;
-      kept += drop[i] ? 0 : 1;
-    }
-    lev.remove_if(drop);
-    World w2(std::move(lev), walls({floor_wall, back_wall, gate_wall}), dom, law, opt);
-    res.prep_time_s += settle(w2, 0.02, "settle_levelled");
+    Particles lev = level_column(w1, floor.level + z.H, kept);
+    World w2(std::move(lev), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
+    res.prep_time_s += run.settle(w2, 0.02, "settle_levelled");
     if (obs) obs->on_progress(0.25);
-
-    // Column as prepared.
-    double top = 0.0, vcol = 0.0;
-    const Particles& pc = w2.particles();
-    for (std::size_t i = 0; i < pc.size(); ++i) {
-      if (pc.fixed[i]) continue;
-      top = std::max(top, pc.x[i][2] + pc.r[i]);
-      vcol += sphere_volume(pc.r[i]);
-    }
     res.particles = kept;
-    res.column_height = top - floor_level;
-    res.aspect_ratio = res.column_height / W;
-    res.column_solid_fraction = vcol / (W * Ly * res.column_height);
-    if (res.column_height < 0.97 * H) {
-      std::ostringstream os;
-      os << "column settled to " << res.column_height << " m, below the target " << H
-         << " m: raise overfill or lower target_solid_fraction";
-      res.outcome.warnings.push_back(os.str());
-    }
+    record_column(w2.particles(), floor.level, z, res);
 
     // Collapse: full floor, no gate, no damping. The contact history of the column
     // is rebuilt within the first steps (the world is reassembled with the floor
     // beyond the gate, which the gate plane would otherwise have touched).
-    stage = "collapse";
+    run.stage = "collapse";
     if (obs) obs->on_stage("collapse");
-    Particles all;
-    for (std::size_t i = 0; i < floor_all.size(); ++i) all.add(floor_all.x[i], floor_all.r[i], mat.density, true);
-    const std::size_t n_floor = all.size();
-    for (std::size_t i = 0; i < pc.size(); ++i)
-      if (!pc.fixed[i]) all.add(pc.x[i], pc.r[i], mat.density, false);
     WorldOptions copt = opt;
     copt.local_damping = 0.0;
-    Wall gate_off = gate_wall;
+    Wall gate_off = rw.gate;
     gate_off.active = false;
-    World w(std::move(all), walls({floor_wall, back_wall, gate_off, end_wall}), dom, law, copt);
+    World w(collapse_grains(floor, w2.particles(), mat.density), rw.with_sides({rw.floor, rw.back, gate_off, rw.end}),
+            dom, law, copt);
     const StabilityLimits lim = stability_limits(w);
     res.dt_critical = lim.governing().dt_critical;
     res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
     if (cfg.energy_guard >= 0.0) w.enable_energy_guard(cfg.energy_guard, 1000);
 
     const std::vector<std::uint8_t> mobile = mobile_mask(w.particles());
-    const double n_mobile = static_cast<double>(res.particles);
-    const int gap_bins = static_cast<int>(std::ceil(cfg.front_max_gap * d_mean / bin));
-    // The heap as the final measurement would read it now (NaN angle: no fit yet).
-    auto heap_now = [&]() {
-      const Particles& p = w.particles();
-      const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
-      const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
-      const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
-      return std::pair<double, double>{front.x, fit.ok ? fit.angle_deg : NAN};
-    };
+    const HeapReader heap{cfg, z, mobile, floor.level, static_cast<int>(std::ceil(cfg.front_max_gap * z.d_mean / z.bin))};
     const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
-    std::vector<Vec3> x_prev = w.particles().x;
-    std::vector<double> scratch;
-    auto sample = [&]() {
-      const Particles& p = w.particles();
-      const double ke = kinetic_energy(p);
-      const double ke_flow = flow_ke_per_grain(p, w.domain(), x_prev, chunk * w.dt(), cfg.rest_trim, scratch);
-      const auto [front_x, angle] = heap_now();
-      res.energy.add({w.time(), ke, ke / n_mobile, ke_flow, front_x, angle}, obs);
-      return ke_flow;
-    };
-    w.refresh();
-    sample();
-    if (obs) obs->on_snapshot("column", w.time(), w.particles());
-    int quiet = 0;
-    bool at_rest = false;
-    const long drag_every = 100;
-    const double drag_factor = std::exp(-cfg.collapse_drag * drag_every * w.dt());
-    while (true) {
-      if (cfg.collapse_drag > 0.0) {
-        for (long done = 0; done < chunk;) {
-          const long k = std::min(drag_every, chunk - done);
-          w.run(k);
-          done += k;
-          Particles& pm = w.particles();
-          const double f = k == drag_every ? drag_factor : std::exp(-cfg.collapse_drag * k * w.dt());
-          for (std::size_t i = 0; i < pm.size(); ++i)
-            if (!pm.fixed[i]) {
-              pm.v[i] *= f;
-              pm.w[i] *= f;
-            }
-        }
-      } else {
-        w.run(chunk);
-      }
-      steps_total += chunk;
-      const double ke = sample();
-      const double t = w.time();
-      quiet = ke < res.rest_ke_J ? quiet + 1 : 0;
-      if (obs) obs->on_progress(0.25 + 0.75 * std::min(1.0, t / cfg.time_limit));
-      if (t >= cfg.min_collapse_time && quiet >= cfg.rest_samples) {
-        at_rest = true;
-        break;
-      }
-      if (t >= cfg.time_limit) break;
-    }
-    res.steps = steps_total;
-    const Particles& p = w.particles();
-    if (obs) obs->on_snapshot("heap", w.time(), p);
-    res.final_particles = p;
+    const bool at_rest = collapse_to_rest(run, w, heap, chunk);
+    res.steps = run.steps_total;
+    if (obs) obs->on_snapshot("heap", w.time(), w.particles());
+    res.final_particles = w.particles();
     res.final_particles.f.clear();  // forces and torques are not part of the record
     res.final_particles.t.clear();
-    (void)n_floor;
-
-    // Final profile (reported even when not settled, for inspection).
-    const SurfaceProfile prof = surface_profile(p.x, p.r, &mobile, 0.0, L, bin, floor_level);
-    for (std::size_t b = 0; b < prof.x.size(); ++b)
-      res.profile.add({prof.x[b], prof.h[b], static_cast<double>(prof.count[b])}, nullptr);
-
-    std::string not_at_rest, profile_note;
-    HeapStillness still;
-    if (!at_rest) {
-      std::ostringstream os;
-      os << "flow kinetic energy per grain up to " << recent_flow_ke(res.energy, cfg.rest_samples) << " J over the last "
-         << cfg.rest_samples << " samples, threshold " << res.rest_ke_J << " J"
-         << few_grains_moving(p, mobile, floor_level, res.energy.rows.back()[res.energy.column("front_x")], d_mean);
-      not_at_rest = os.str();
-      if (cfg.rest_profile_window > 0.0) {
-        const auto col = [&](const char* name) {
-          const std::size_t c = res.energy.column(name);
-          std::vector<double> v;
-          for (const auto& row : res.energy.rows) v.push_back(row[c]);
-          return v;
-        };
-        still = heap_stillness(col("time"), col("front_x"), col("repose_deg"), w.time() - cfg.rest_profile_window,
-                               cfg.min_collapse_time);
-        std::ostringstream note;
-        if (still.judged) {
-          res.profile_angle_change_deg = still.angle_change_deg;
-          res.profile_front_change_m = still.front_change_m;
-          res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
-          note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by "
-               << still.angle_change_deg << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by "
-               << still.front_change_m << " m (the spread of its lowest value in each sixth of the window; tolerance one bin, "
-               << bin << " m)";
-          if (still.front_excursion_m > still.front_change_m + 1e-12)
-            note << ", with excursions of up to " << still.front_excursion_m << " m (grains hopping at the toe)";
-        } else {
-          note << "the heap's profile was not judged: " << still.why;
-          if (cfg.profile_check_has_no_room())
-            note << " (repose.time_limit " << cfg.time_limit << " s leaves no room for the " << cfg.rest_profile_window
-                 << " s window after repose.min_collapse_time " << cfg.min_collapse_time << " s: raise it above "
-                 << cfg.profile_check_time() << " s for the check to run)";
-        }
-        profile_note = note.str();
-      }
-    }
-    if (!at_rest && !res.rest_by_profile) {
-      std::ostringstream os;
-      os << "deposit not at rest after " << w.time() << " s (time limit " << cfg.time_limit << " s): " << not_at_rest;
-      if (!profile_note.empty()) os << "; " << profile_note;
-      res.outcome.status = SceneStatus::not_settled;
-      res.outcome.failed_stage = "collapse";
-      res.outcome.message = os.str();
-    } else {
-      if (res.rest_by_profile) {
-        res.time_to_rest_s = still.since;  // still since at least then
-        std::ostringstream os;
-        os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
-           << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start";
-        res.outcome.warnings.push_back(os.str());
-      } else {
-        res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
-      }
-      const Front front = deposit_front(prof, 0, cfg.front_min_height * d_mean, gap_bins, &p.x, &p.r, &mobile);
-      const SlopeFit fit = fit_heap(prof, front, cfg.fit_lo, cfg.fit_hi);
-      if (front.bin >= 0)  // no front, no deposit to be beyond
-        for (std::size_t i = 0; i < p.size(); ++i)
-          if (mobile[i] && p.x[i][0] - p.r[i] > front.x) ++res.grains_beyond_front;
-      res.final_height_m = fit.h_max;
-      res.front_m = front.x;
-      res.runout_m = front.x - W;
-      res.runout_ratio = res.runout_m / W;
-      for (std::size_t i = 0; i < p.size(); ++i)
-        if (mobile[i] && p.x[i][0] + p.r[i] > L - 0.5 * mat.d_min) res.reached_end_wall = true;
-      if (res.reached_end_wall)
-        res.outcome.warnings.push_back("grains reached the end wall: runout is bounded by domain_length");
-      if (fit.ok) {
-        res.repose_deg = fit.angle_deg;
-        res.repose_fit_err_deg = fit.angle_err_deg;
-        res.fit_points = fit.points;
-        res.repose_upper_deg = fit.upper_angle_deg;
-        res.repose_lower_deg = fit.lower_angle_deg;
-        res.fit_slope = fit.slope;
-        res.fit_intercept = fit.intercept;
-        res.fit_x_upper = fit.x_upper;
-        res.fit_x_lower = fit.x_lower;
-        const double win = cfg.steep_window > 0.0 ? cfg.steep_window : 5.0 * d_mean;
-        const int wbins = std::max(2, static_cast<int>(std::lround(win / bin)));
-        res.steepest_deg = steepest_angle_deg(prof.x, prof.h, fit.x_upper, fit.x_lower, wbins);
-      } else {
-        res.repose_deg = NAN;
-        res.outcome.warnings.push_back("no angle of repose: " + fit.why);
-      }
-    }
+    finish_collapse(cfg, z, w, heap, at_rest, chunk, res);
   } catch (const InstabilityError& e) {
     res.outcome.status = SceneStatus::unstable;
-    res.outcome.failed_stage = stage;
+    res.outcome.failed_stage = run.stage;
     res.outcome.message = e.what();
   } catch (const std::runtime_error& e) {
     res.outcome.status = SceneStatus::not_settled;
-    res.outcome.failed_stage = stage;
+    res.outcome.failed_stage = run.stage;
     res.outcome.message = e.what();
   }
-  res.steps = steps_total;
+  res.steps = run.steps_total;
   for (const auto& wmsg : res.outcome.warnings) {
     if (!res.outcome.message.empty()) res.outcome.message += "; ";
     res.outcome.message += wmsg;

@@ -457,236 +457,240 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
                                    "window or replicas pin phi_cv down)");
 }
 
-TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
-  cfg.validate();
-  const RunClock clock;
-  TriaxialResult res;
-  res.packing = to_string(cfg.packing);
-  res.threads = cfg.threads;
-  res.walls = "six smooth rigid walls (frictionless: normal force only); z axial, x and y lateral; servo-controlled";
-  res.walls_frictionless = true;
-  res.prep_damping = cfg.prep_damping;
-  res.local_damping_used = cfg.prep_damping > 0.0 || cfg.shear_damping > 0.0;
-  res.shear_damping = cfg.shear_damping;
-  res.grain_density = cfg.grain_density();
-  res.series.name = "triaxial";
-  res.series.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
-                        "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
-                        "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step",
-                        "z_interior", "z_mech_interior"};
-  res.series.units = {"1",  "1",  "1",  "1",   "1",   "1",  "Pa", "Pa", "Pa", "Pa", "Pa", "1", "deg",
-                      "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1",
-                      "1",  "1"};
+namespace {
 
-  // Sample: diameters from the material's grading, random insertion at a low solid fraction.
-  const Material& mat = cfg.material;
+Series triaxial_series() {
+  Series s;
+  s.name = "triaxial";
+  s.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
+               "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
+               "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step",
+               "z_interior", "z_mech_interior"};
+  s.units = {"1",  "1",  "1",  "1",   "1",   "1",  "Pa", "Pa", "Pa", "Pa", "Pa", "1", "deg",
+             "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1",
+             "1",  "1"};
+  return s;
+}
+
+// The grains before any wall moves: diameters from the material's grading, inserted
+// at random at a low solid fraction into a box of the configured aspect ratio.
+struct Sample {
+  Particles particles;
+  Vec3 lo, hi;
+  double solid_volume = 0.0;
+  double width = 0.0;  // lateral side of the box [m]
+};
+
+Sample make_sample(const TriaxialConfig& cfg, TriaxialResult& res) {
   std::mt19937_64 rng(cfg.seed);
-  std::vector<double> radii = sample_radii(cfg.particles, mat.grading(), rng);
-  double vs = 0.0, dsum = 0.0;
+  std::vector<double> radii = sample_radii(cfg.particles, cfg.material.grading(), rng);
+  Sample smp;
+  double dsum = 0.0;
   for (double r : radii) {
-    vs += sphere_volume(r);
+    smp.solid_volume += sphere_volume(r);
     dsum += 2.0 * r;
   }
   res.d_mean = dsum / static_cast<double>(radii.size());
   res.particles = static_cast<long>(radii.size());
-  const double width = std::cbrt(vs / (cfg.initial_solid_fraction * cfg.aspect_ratio));
-  const Vec3 lo = Vec3::Zero(), hi(width, width, width * cfg.aspect_ratio);
-  Particles p;
-  insert_random(p, radii, lo, hi, cfg.grain_density(), rng);
+  smp.width = std::cbrt(smp.solid_volume / (cfg.initial_solid_fraction * cfg.aspect_ratio));
+  smp.lo = Vec3::Zero();
+  smp.hi = Vec3(smp.width, smp.width, smp.width * cfg.aspect_ratio);
+  insert_random(smp.particles, radii, smp.lo, smp.hi, cfg.grain_density(), rng);
+  return smp;
+}
 
+WorldOptions world_options(const TriaxialConfig& cfg, const Particles& p) {
   double m_min = 1e300;
   for (double m : p.m) m_min = std::min(m_min, m);
   WorldOptions opt;
-  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, mat.kn);
+  opt.dt = cfg.dt > 0.0 ? cfg.dt : timestep_from_factor(cfg.dt_factor, m_min, cfg.material.kn);
   opt.threads = cfg.threads;
   opt.max_overlap_fraction = cfg.max_overlap_fraction;
   opt.local_damping = cfg.prep_damping;
-  Domain dom;
-  dom.lo = lo;
-  dom.hi = hi;
+  return opt;
+}
 
-  const ContactParams target = contact_params(mat);
-  const ContactParams smooth = frictionless(target);  // dense step (i)
-  // The time step is checked against the target law (the stiffest one used).
-  World world(std::move(p), box_walls(lo, hi), dom, target, opt);
+// The step is checked against the target law (the stiffest one used); a dense
+// preparation then starts frictionless, at that law's own larger step.
+void choose_steps(World& world, const TriaxialConfig& cfg, const ContactParams& target, double dt,
+                  TriaxialResult& res) {
+  const StabilityLimits lim = stability_limits(world);
+  res.dt = dt;
+  res.dt_critical = lim.governing().dt_critical;
+  res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
+  if (cfg.packing != Packing::dense) return;
+  world.set_contact_params(frictionless(target));  // dense step (i)
+  const double scale = cfg.frictionless_dt_scale > 0.0 ? cfg.frictionless_dt_scale
+                                                        : frictionless_step_ratio(world, target, dt);
+  res.dt_frictionless = dt * scale;
+  world.set_dt(res.dt_frictionless);  // refuses a step above the frictionless law's limit
+}
+
+// Isotropic preparation to p0. Loose: with the target law. Dense (the seed's): the
+// frictionless law to prep_pressure_factor * p0, unloaded to p0, then the target law
+// switched on, stabilised and recompressed.
+void prepare(Rig& rig, const ContactParams& target, double dt, double width, TriaxialResult& res) {
+  const TriaxialConfig& cfg = rig.cfg;
+  World& world = rig.world;
+  const ServoGains gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * cfg.prep_strain_rate * width};
+  if (cfg.packing != Packing::dense) {
+    res.stages.push_back(servo_to_equilibrium(rig, "isotropic_compression", cfg.confining_pressure, gains, 0.0, 0.3));
+    return;
+  }
+  const double p0 = cfg.confining_pressure, pf = cfg.prep_pressure_factor;
+  res.stages.push_back(servo_to_equilibrium(rig, "isotropic_compression", pf * p0, gains, 0.0, 0.1));
+  rig.target_p = pf * p0;
+  if (pf != 1.0)
+    // The walls' stresses only: a frictionless packing held by servo walls at p0
+    // keeps creeping (UFR 0.01-0.045 for 160,000 steps in one 2,000-grain run, a
+    // round-off decides whether it dips below 0.01 early), while friction,
+    // switched on next, arrests it within the stabilise stage, which judges UFR.
+    // unloading_steps counts steps of dt: the ramp lasts as long in simulated time
+    // whatever step the frictionless stages take.
+    res.stages.push_back(servo_to_equilibrium(rig, "unloading", p0, gains, 0.1, 0.15,
+                                              std::lround(static_cast<double>(cfg.unloading_steps) * dt / world.dt()),
+                                              false));
+  world.set_dt(dt);  // before the stiffer law, which would refuse the larger step
+  world.set_contact_params(target);
+  res.stages.push_back(stabilise(rig, "stabilise"));
+  res.stages.push_back(servo_to_equilibrium(rig, "recompression", cfg.confining_pressure, gains, 0.15, 0.3));
+}
+
+// One row of the shear's series a call, strains from the box at the start of shear;
+// also keeps the lateral walls' stress error.
+struct ShearRecorder {
+  Rig& rig;
+  TriaxialResult& res;
+  Vec3 L0;
+  double V0;
+  long s0;
+  double err_sum = 0.0;
+  long err_n = 0;
+
+  ShearRecorder(Rig& r, TriaxialResult& out)
+      : rig(r), res(out), L0(r.lengths()), V0(L0.prod()), s0(r.world.step_count()) {}
+
+  double axial_strain() const { return (L0[2] - rig.length(2)) / L0[2]; }
+
+  double record() {
+    const TriaxialConfig& cfg = rig.cfg;
+    const World& world = rig.world;
+    const Vec3 L = rig.lengths();
+    const double e1 = (L0[2] - L[2]) / L0[2], e2 = (L0[0] - L[0]) / L0[0], e3 = (L0[1] - L[1]) / L0[1];
+    const double ev = (V0 - L.prod()) / V0;
+    const double s1 = rig.axis_stress(2), s2 = rig.axis_stress(0), s3 = rig.axis_stress(1);
+    const double s3m = 0.5 * (s2 + s3);
+    const double pm = (s1 + s2 + s3) / 3.0, q = s1 - s3m;
+    double n_in = 0.0;
+    const Mat3 lw = interior_stress(world, rig.interior(), n_in);
+    const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
+    const Coordination z = coordination(world);
+    const Coordination z_in = coordination(world, rig.interior());
+    const double ufr = unbalanced_force_ratio(world);
+    const double inertial = inertial_number(cfg.strain_rate, res.d_mean, cfg.grain_density(), pm);
+    for (int f = 0; f < 4; ++f) {
+      const double e = std::abs(rig.face_stress(f) - cfg.confining_pressure) / cfg.confining_pressure;
+      if (world.step_count() > s0) {
+        err_sum += e;
+        ++err_n;
+        res.shear_stress_error_max = std::max(res.shear_stress_error_max, e);
+      }
+    }
+    res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
+                    sine_to_deg(mobilised_sine(s1, s2, s3)), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
+                    z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
+                    static_cast<double>(world.step_count()), z_in.all, z_in.mechanical},
+                   rig.obs);
+    return e1;
+  }
+};
+
+// The deviatoric stage: top and bottom walls at a constant axial strain rate,
+// lateral walls servo-held at p0, to the target axial strain.
+void shear(Rig& rig, TriaxialResult& res) {
+  const TriaxialConfig& cfg = rig.cfg;
+  World& world = rig.world;
+  Observer* obs = rig.obs;
+  rig.stage = "shear";
+  rig.target_p = cfg.confining_pressure;
+  if (obs) obs->on_stage("shear");
+  const double t_shear0 = world.time();
+  ShearRecorder rec(rig, res);
+  const Vec3& L0 = rec.L0;
+  for (int a = 0; a < 3; ++a) res.sample_size[a] = L0[a];
+  res.porosity_initial = rig.porosity();
   {
-    const StabilityLimits lim = stability_limits(world);
-    res.dt = opt.dt;
-    res.dt_critical = lim.governing().dt_critical;
-    res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
+    double n_in = 0.0;
+    const Mat3 lw = interior_stress(world, rig.interior(), n_in);
+    res.porosity_interior_initial = n_in;
+    const double p_walls = rig.mean_stress();
+    res.lw_wall_mismatch = std::abs(lw.trace() / 3.0 - p_walls) / p_walls;
   }
-  if (cfg.packing == Packing::dense) {
-    world.set_contact_params(smooth);
-    const double scale = cfg.frictionless_dt_scale > 0.0 ? cfg.frictionless_dt_scale
-                                                          : frictionless_step_ratio(world, target, opt.dt);
-    res.dt_frictionless = opt.dt * scale;
-    world.set_dt(res.dt_frictionless);  // refuses a step above the frictionless law's limit
-  }
-
-  Rig rig{world, cfg, obs, vs, {}, "", cfg.confining_pressure};
-  const ServoGains prep_gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * cfg.prep_strain_rate * width};
-
-  auto finish = [&]() {
-    res.steps = world.step_count();
-    res.wall_seconds = clock.wall_seconds();
-    res.cpu_seconds = clock.cpu_seconds();
+  // Top and bottom walls: constant speed 0.5 * rate * L0 each, reached by a
+  // linear ramp in time over the first shear_ramp_strain (a sudden start hits
+  // the heavy, stiff grains like an impact and shows up as a false peak).
+  const double v_axial = 0.5 * cfg.strain_rate * L0[2];
+  const double t_ramp = 2.0 * cfg.shear_ramp_strain / cfg.strain_rate;
+  auto set_axial_speed = [&]() {
+    const double t = world.time() - t_shear0;
+    const double v = t_ramp > 0.0 ? v_axial * std::min(1.0, (t + world.dt()) / t_ramp) : v_axial;
+    world.walls()[4].velocity = v * world.walls()[4].normal;
+    world.walls()[5].velocity = v * world.walls()[5].normal;
   };
+  const double lat_rate = cfg.shear_servo_strain_rate > 0 ? cfg.shear_servo_strain_rate : 20.0 * cfg.strain_rate;
+  const ServoGains gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * lat_rate * std::max(L0[0], L0[1])};
 
-  try {
-    // ---- preparation
-    if (cfg.packing == Packing::dense) {
-      const double p0 = cfg.confining_pressure, pf = cfg.prep_pressure_factor;
-      res.stages.push_back(servo_to_equilibrium(rig, "isotropic_compression", pf * p0, prep_gains, 0.0, 0.1));
-      rig.target_p = pf * p0;
-      if (pf != 1.0)
-        // The walls' stresses only: a frictionless packing held by servo walls at p0
-        // keeps creeping (UFR 0.01-0.045 for 160,000 steps in one 2,000-grain run, a
-        // round-off decides whether it dips below 0.01 early), while friction,
-        // switched on next, arrests it within the stabilise stage, which judges UFR.
-        // unloading_steps counts steps of dt: the ramp lasts as long in simulated time
-        // whatever step the frictionless stages take.
-        res.stages.push_back(servo_to_equilibrium(
-            rig, "unloading", p0, prep_gains, 0.1, 0.15,
-            std::lround(static_cast<double>(cfg.unloading_steps) * opt.dt / world.dt()), false));
-      world.set_dt(opt.dt);  // before the stiffer law, which would refuse the larger step
-      world.set_contact_params(target);
-      res.stages.push_back(stabilise(rig, "stabilise"));
-      res.stages.push_back(servo_to_equilibrium(rig, "recompression", cfg.confining_pressure, prep_gains, 0.15, 0.3));
-    } else {
-      res.stages.push_back(
-          servo_to_equilibrium(rig, "isotropic_compression", cfg.confining_pressure, prep_gains, 0.0, 0.3));
+  world.refresh();
+  rec.record();
+  if (obs) obs->on_snapshot("prepared", world.time(), world.particles());
+  const double snapshot_strain = 0.05;  // ParaView frames: enough to see a shear band form
+  double next_snapshot = snapshot_strain;
+  double next = cfg.sample_strain;
+  const double dstrain = cfg.strain_rate * world.dt();  // per step
+  const long est_steps = static_cast<long>(std::ceil(cfg.axial_strain / dstrain));
+  const long budget = est_steps + est_steps / 10 + static_cast<long>(t_ramp / world.dt()) + 100;
+  double e1 = 0.0;
+  // The end is judged with the sampling's tolerance: otherwise a sample landing half
+  // a step short of the target was followed by one more step and a near-duplicate
+  // last row and frame, in some replicas and not others.
+  const double end = cfg.axial_strain - 0.5 * dstrain;
+  while (e1 < end) {
+    if (world.step_count() - rec.s0 > budget)
+      throw StageFailed("shear did not reach the target axial strain within " + std::to_string(budget) + " steps");
+    rig.servo_faces(0, 3, gains);
+    set_axial_speed();
+    world.step();
+    e1 = rec.axial_strain();
+    const bool due = cfg.sample_steps > 0 ? (world.step_count() - rec.s0) % cfg.sample_steps == 0
+                                           : e1 >= next - 0.5 * dstrain;
+    if (due || e1 >= end) {
+      rec.record();
+      next += cfg.sample_strain;
+      if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
     }
-    world.set_local_damping(cfg.shear_damping);  // 0 unless the diagnostic asks for it
-
-    // ---- deviatoric stage
-    rig.stage = "shear";
-    rig.target_p = cfg.confining_pressure;
-    if (obs) obs->on_stage("shear");
-    const long s0 = world.step_count();
-    const double t_shear0 = world.time();
-    const Vec3 L0 = rig.lengths();
-    const double V0 = L0.prod();
-    for (int a = 0; a < 3; ++a) res.sample_size[a] = L0[a];
-    res.porosity_initial = rig.porosity();
-    {
-      double n_in = 0.0;
-      const Mat3 lw = interior_stress(world, rig.interior(), n_in);
-      res.porosity_interior_initial = n_in;
-      const double p_walls = rig.mean_stress();
-      res.lw_wall_mismatch = std::abs(lw.trace() / 3.0 - p_walls) / p_walls;
+    // Frames at their strain whatever the rows' spacing (rows every N steps may
+    // span more than a frame's 0.05).
+    if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < end) {
+      char label[32];
+      std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
+      obs->on_snapshot(label, world.time(), world.particles());
+      next_snapshot += snapshot_strain;
     }
-    // Top and bottom walls: constant speed 0.5 * rate * L0 each, reached by a
-    // linear ramp in time over the first shear_ramp_strain (a sudden start hits
-    // the heavy, stiff grains like an impact and shows up as a false peak).
-    const double v_axial = 0.5 * cfg.strain_rate * L0[2];
-    const double t_ramp = 2.0 * cfg.shear_ramp_strain / cfg.strain_rate;
-    auto set_axial_speed = [&]() {
-      const double t = world.time() - t_shear0;
-      const double v = t_ramp > 0.0 ? v_axial * std::min(1.0, (t + world.dt()) / t_ramp) : v_axial;
-      world.walls()[4].velocity = v * world.walls()[4].normal;
-      world.walls()[5].velocity = v * world.walls()[5].normal;
-    };
-    const double lat_rate = cfg.shear_servo_strain_rate > 0 ? cfg.shear_servo_strain_rate : 20.0 * cfg.strain_rate;
-    const ServoGains shear_gains{cfg.servo_alpha, cfg.servo_beta, 0.5 * lat_rate * std::max(L0[0], L0[1])};
-    const double rho = cfg.grain_density();
-
-    double err_sum = 0.0;
-    long err_n = 0;
-    auto sample = [&]() {
-      const Vec3 L = rig.lengths();
-      const double e1 = (L0[2] - L[2]) / L0[2], e2 = (L0[0] - L[0]) / L0[0], e3 = (L0[1] - L[1]) / L0[1];
-      const double ev = (V0 - L.prod()) / V0;
-      const double s1 = rig.axis_stress(2), s2 = rig.axis_stress(0), s3 = rig.axis_stress(1);
-      const double s3m = 0.5 * (s2 + s3);
-      const double pm = (s1 + s2 + s3) / 3.0, q = s1 - s3m;
-      double n_in = 0.0;
-      const Mat3 lw = interior_stress(world, rig.interior(), n_in);
-      const double lwp = lw.trace() / 3.0, lwq = lw(2, 2) - 0.5 * (lw(0, 0) + lw(1, 1));
-      const Coordination z = coordination(world);
-      const Coordination z_in = coordination(world, rig.interior());
-      const double ufr = unbalanced_force_ratio(world);
-      const double inertial = inertial_number(cfg.strain_rate, res.d_mean, rho, pm);
-      for (int f = 0; f < 4; ++f) {
-        const double e = std::abs(rig.face_stress(f) - cfg.confining_pressure) / cfg.confining_pressure;
-        if (world.step_count() > s0) {
-          err_sum += e;
-          ++err_n;
-          res.shear_stress_error_max = std::max(res.shear_stress_error_max, e);
-        }
-      }
-      res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
-                      sine_to_deg(mobilised_sine(s1, s2, s3)), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
-                      z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
-                      static_cast<double>(world.step_count()), z_in.all, z_in.mechanical},
-                     obs);
-      return e1;
-    };
-
-    world.refresh();
-    sample();
-    if (obs) obs->on_snapshot("prepared", world.time(), world.particles());
-    const double snapshot_strain = 0.05;  // ParaView frames: enough to see a shear band form
-    double next_snapshot = snapshot_strain;
-    double next = cfg.sample_strain;
-    const double dstrain = cfg.strain_rate * world.dt();  // per step
-    const long est_steps = static_cast<long>(std::ceil(cfg.axial_strain / dstrain));
-    const long budget = est_steps + est_steps / 10 + static_cast<long>(t_ramp / world.dt()) + 100;
-    double e1 = 0.0;
-    // The end is judged with the sampling's tolerance: otherwise a sample landing half
-    // a step short of the target was followed by one more step and a near-duplicate
-    // last row and frame, in some replicas and not others.
-    const double end = cfg.axial_strain - 0.5 * dstrain;
-    while (e1 < end) {
-      if (world.step_count() - s0 > budget)
-        throw StageFailed("shear did not reach the target axial strain within " + std::to_string(budget) + " steps");
-      rig.servo_faces(0, 3, shear_gains);
-      set_axial_speed();
-      world.step();
-      e1 = (L0[2] - rig.length(2)) / L0[2];
-      const bool due = cfg.sample_steps > 0 ? (world.step_count() - s0) % cfg.sample_steps == 0
-                                             : e1 >= next - 0.5 * dstrain;
-      if (due || e1 >= end) {
-        sample();
-        next += cfg.sample_strain;
-        if (obs) obs->on_progress(0.3 + 0.7 * std::min(1.0, e1 / cfg.axial_strain));
-      }
-      // Frames at their strain whatever the rows' spacing (rows every N steps may
-      // span more than a frame's 0.05).
-      if (obs && e1 >= next_snapshot - 0.5 * dstrain && e1 < end) {
-        char label[32];
-        std::snprintf(label, sizeof label, "eps1=%.2f", next_snapshot);
-        obs->on_snapshot(label, world.time(), world.particles());
-        next_snapshot += snapshot_strain;
-      }
-    }
-    if (obs) obs->on_snapshot("final", world.time(), world.particles());
-    rig.stop_walls();
-    res.shear_stress_error_mean = err_n ? err_sum / static_cast<double>(err_n) : 0.0;
-    {
-      StageReport sr = rig.report("shear", s0, true, rig.stress_error(0, 3));
-      res.stages.push_back(sr);
-    }
-  } catch (const InstabilityError& e) {
-    res.outcome.status = SceneStatus::unstable;
-    res.outcome.failed_stage = rig.stage;
-    res.outcome.message = std::string("stage ") + rig.stage + ": " + e.what();
-    finish();
-    return res;
-  } catch (const StageFailed& e) {
-    res.outcome.status = SceneStatus::not_converged;
-    res.outcome.failed_stage = rig.stage;
-    res.outcome.message = e.what();
-    finish();
-    return res;
   }
+  if (obs) obs->on_snapshot("final", world.time(), world.particles());
+  rig.stop_walls();
+  res.shear_stress_error_mean = rec.err_n ? rec.err_sum / static_cast<double>(rec.err_n) : 0.0;
+  res.stages.push_back(rig.report("shear", rec.s0, true, rig.stress_error(0, 3)));
+}
 
-  // ---- metrics from the series
+// The peak and critical-state angles from the walls and from the interior
+// Love-Weber stress, with the critical-state window judged.
+void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   const Series& s = res.series;
   const std::size_t c_e1 = s.column("eps1"), c_ev = s.column("eps_v"), c_s1 = s.column("sigma1"),
                     c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3"), c_q = s.column("q"),
-                    c_n = s.column("porosity"), c_in = s.column("inertial");
+                    c_in = s.column("inertial");
   const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
-  // The walls' angles, and the same from the interior Love-Weber stress.
   double best = -1.0, best_in = -1.0, cv_in = 0.0;
   std::vector<double> sines, cv, cv_e1, cv_ev, cv_phi;
   for (const auto& r : s.rows) {
@@ -712,19 +716,25 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   res.phi_peak_smoothed_deg = sine_to_deg(peak_of_running_mean(sines, 5));
   res.phi_peak_interior_deg = sine_to_deg(best_in);
   res.cv_samples = static_cast<int>(cv.size());
-  if (!cv.empty()) {
-    const MeanEstimate est = correlated_mean(cv);
-    res.phi_cv_deg = sine_to_deg(est.mean);
-    res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
-    res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
-    res.cv_effective_samples = est.effective_samples;
-    judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
-  } else {
+  if (cv.empty()) {
     res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
     res.phi_cv_deg = NAN;
     res.phi_cv_interior_deg = NAN;
+    return;
   }
-  res.porosity_final = s.rows.back()[c_n];
+  const MeanEstimate est = correlated_mean(cv);
+  res.phi_cv_deg = sine_to_deg(est.mean);
+  res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
+  res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
+  res.cv_effective_samples = est.effective_samples;
+  judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
+}
+
+// Final state and the largest dilatancy angle over any dilatancy_window of strain.
+void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
+  const Series& s = res.series;
+  const std::size_t c_e1 = s.column("eps1"), c_ev = s.column("eps_v");
+  res.porosity_final = s.rows.back()[s.column("porosity")];
   res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
   res.eps_v_final = s.rows.back()[c_ev];
   res.max_dilatancy_deg = -90.0;
@@ -737,6 +747,9 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
       break;
     }
   }
+}
+
+void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
   if (res.max_inertial_number > cfg.quasi_static_inertial)
     res.outcome.warnings.push_back("not quasi-static: largest inertial number (strain rate * d_mean * sqrt(rho/p)) " +
                                    fmt(res.max_inertial_number) +
@@ -751,6 +764,60 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");
+}
+
+}  // namespace
+
+TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
+  cfg.validate();
+  const RunClock clock;
+  TriaxialResult res;
+  res.packing = to_string(cfg.packing);
+  res.threads = cfg.threads;
+  res.walls = "six smooth rigid walls (frictionless: normal force only); z axial, x and y lateral; servo-controlled";
+  res.walls_frictionless = true;
+  res.prep_damping = cfg.prep_damping;
+  res.local_damping_used = cfg.prep_damping > 0.0 || cfg.shear_damping > 0.0;
+  res.shear_damping = cfg.shear_damping;
+  res.grain_density = cfg.grain_density();
+  res.series = triaxial_series();
+
+  Sample smp = make_sample(cfg, res);
+  const WorldOptions opt = world_options(cfg, smp.particles);
+  Domain dom;
+  dom.lo = smp.lo;
+  dom.hi = smp.hi;
+  const ContactParams target = contact_params(cfg.material);
+  World world(std::move(smp.particles), box_walls(smp.lo, smp.hi), dom, target, opt);
+  choose_steps(world, cfg, target, opt.dt, res);
+
+  Rig rig{world, cfg, obs, smp.solid_volume, {}, "", cfg.confining_pressure};
+  auto finish = [&]() {
+    res.steps = world.step_count();
+    res.wall_seconds = clock.wall_seconds();
+    res.cpu_seconds = clock.cpu_seconds();
+  };
+  try {
+    prepare(rig, target, opt.dt, smp.width, res);
+    world.set_local_damping(cfg.shear_damping);  // 0 unless the diagnostic asks for it
+    shear(rig, res);
+  } catch (const InstabilityError& e) {
+    res.outcome.status = SceneStatus::unstable;
+    res.outcome.failed_stage = rig.stage;
+    res.outcome.message = std::string("stage ") + rig.stage + ": " + e.what();
+    finish();
+    return res;
+  } catch (const StageFailed& e) {
+    res.outcome.status = SceneStatus::not_converged;
+    res.outcome.failed_stage = rig.stage;
+    res.outcome.message = e.what();
+    finish();
+    return res;
+  }
+
+  angles_from_series(cfg, res);
+  volume_change_from_series(cfg, res);
+  warn_about_the_regime(cfg, res);
   for (const auto& w : res.outcome.warnings) res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + w;
   finish();
   if (obs) obs->on_progress(1.0);
