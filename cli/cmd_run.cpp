@@ -59,6 +59,11 @@ int run(const RunArgs& a) {
 #else
   const jobs::RunSummary s = jobs::run_job(store, job, opt);
 #endif
+  if (!s.database_lost.empty()) {
+    std::cerr << "demcal: error: " << s.database_lost << ": this run's results since then went with the old file, "
+              << "and the run stopped. Run the job again into a database that stays put\n";
+    return kRuntime;
+  }
   if (s.superseded) {
     std::cerr << "demcal: error: job " << job.name << " was recorded again from a different job file by another run while "
               << "this one was at work: the job now holds that file's tasks, so this run stopped after the " << s.ran
@@ -79,10 +84,14 @@ int run(const RunArgs& a) {
   if (s.failed > 0 && !s.interrupted)
     std::cerr << "why they failed: demcal status --db " << a.db << " --job " << job.name
               << "; to run them again: demcal run " << a.job << same << " --retry-failed\n";
-  if (s.unfinished > 0 && !s.interrupted)
+  if (!s.output_failure.empty())
+    std::cerr << "demcal: error: stopped: " << s.output_failure << ". The tasks not yet started were left pending; "
+              << "free space in (or fix) the output folder " << jobs::task_output_dir(job, opt)
+              << ", then: demcal run " << a.job << same << " --retry-failed\n";
+  else if (s.unfinished > 0 && !s.interrupted)
     std::cerr << "unfinished tasks are held by another runner (demcal status --db " << a.db
               << "); if none is at work on them any more: demcal run " << a.job << same << " --requeue-running\n";
-  if (s.interrupted || s.failed > 0 || s.unfinished > 0) return kRuntime;
+  if (s.interrupted || s.failed > 0 || s.unfinished > 0 || !s.output_failure.empty()) return kRuntime;
   return kOk;
 }
 

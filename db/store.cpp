@@ -8,6 +8,7 @@
 #include <cmath>
 #include <set>
 #include <thread>
+#include <sys/stat.h>
 
 namespace demcal::db {
 namespace {
@@ -81,6 +82,19 @@ Store::Store(const std::string& path, bool read_only) : path_(path), conn_(check
   conn_.exec("PRAGMA synchronous = NORMAL");  // WAL + NORMAL: durable across process kills
   conn_.exec("PRAGMA foreign_keys = ON");
   migrate(conn_);
+  struct stat st {};
+  if (::stat(path_.c_str(), &st) == 0) {
+    dev_ = st.st_dev;
+    ino_ = st.st_ino;
+  }
+}
+
+std::string Store::file_lost() const {
+  if (ino_ == 0) return "";  // never seen (read-only stores are not asked)
+  struct stat st {};
+  if (::stat(path_.c_str(), &st) != 0) return "deleted";
+  if (st.st_dev != dev_ || st.st_ino != ino_) return "replaced by another file";
+  return "";
 }
 
 std::optional<std::int64_t> Store::find_job(const std::string& name) {

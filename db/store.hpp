@@ -109,10 +109,15 @@ class Store {
   std::vector<FitRow> fits();
 
   const std::string& path() const { return path_; }
+  // Empty while `path` still names the file this store opened; else what became of
+  // it ("deleted", "replaced by another file"). A run whose database file is deleted
+  // writes on into the unlinked file and its results vanish with it.
+  std::string file_lost() const;
 
  private:
   std::string path_;
   Connection conn_;
+  unsigned long long dev_ = 0, ino_ = 0;  // the opened file's identity
 };
 
 double unix_now();

@@ -8,6 +8,7 @@
 #include <H5Cpp.h>
 
 #include <algorithm>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 
@@ -110,9 +111,19 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
   H5::Exception::dontPrint();
   // Written beside the final name and renamed when whole: a run stopped mid-write
   // (or a full disk) leaves no file at the recorded path that looks valid.
-  PartFile file(path);
+  // Two runs may write the same task's file at once (one task in two databases whose
+  // output folders are one): each writes its own part.
+  PartFile file = PartFile::private_to_this_process(path);
+  // The file is closed exactly once: when HDF5 fails to close it (a full disk shows
+  // there, as cached chunks are written out), the C++ destructor's second H5Fclose
+  // of the same id crashed in H5F__close. So the cache is flushed first, and the
+  // file closed once whatever fails, never by the destructor after a failure (the
+  // object is let go: a worker process exits after its task; the part file is
+  // removed all the same).
+  std::unique_ptr<H5::H5File> f_owner;
   try {
-    H5::H5File f(file.part(), H5F_ACC_TRUNC);
+    f_owner = std::make_unique<H5::H5File>(file.part(), H5F_ACC_TRUNC);
+    H5::H5File& f = *f_owner;
     string_attr(f, "scene", info.scene);
     string_attr(f, "params", params.dump());
     string_attr(f, "task_key", info.task_key);
@@ -124,9 +135,17 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     for (const auto& s : series) write_series(root, s);
     for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);
     root.close();
-    f.close();  // a failed flush throws here, not silently in a destructor
+    f.flush(H5F_SCOPE_GLOBAL);  // a full disk throws here, with the file still whole to close
   } catch (const H5::Exception& e) {
-    throw std::runtime_error("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
+    if (f_owner) H5Fclose(f_owner.release()->getId());  // once, and without the destructor's line on stderr
+    throw OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
+                             " (is the disk full, or the folder not writable?)");
+  }
+  try {
+    f_owner->close();
+  } catch (const H5::Exception& e) {
+    (void)f_owner.release();  // its destructor would close it a second time
+    throw OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
                              " (is the disk full, or the folder not writable?)");
   }
   file.commit("HDF5 file");

@@ -12,11 +12,29 @@
 namespace demcal::jobs {
 namespace {
 
-std::string host() {
+std::string hostname() {
   char buf[256] = {};
   gethostname(buf, sizeof buf - 1);
   return buf;
 }
+
+// "This host" is this hostname and this pid namespace: runners in two containers
+// that share a hostname cannot see each other's processes, and judged by pid each
+// took the other for dead and re-queued its tasks over and over (one task ran 22
+// times). Across namespaces they are judged by heartbeat, as across hosts.
+std::string host() {
+  std::string h = hostname();
+  char link[64] = {};
+  const ssize_t n = readlink("/proc/self/ns/pid", link, sizeof link - 1);
+  const std::string ns(link, n > 0 ? static_cast<std::size_t>(n) : 0);  // "pid:[4026531836]"
+  const auto a = ns.find('['), b = ns.find(']');
+  if (a != std::string::npos && b != std::string::npos && b > a + 1) h += "/pidns" + ns.substr(a + 1, b - a - 1);
+  return h;
+}
+
+// A token written by a demcal from before the namespace was part of "this host"
+// names the bare hostname: judged by its process as before.
+bool on_this_host(const std::string& token_host) { return token_host == host() || token_host == hostname(); }
 
 // State letter and start time (field 22) of a process, or empty when none.
 bool proc_stat(long pid, char& state, std::string& start) {
@@ -96,7 +114,7 @@ std::string seconds(double s) { return std::to_string(static_cast<long>(std::lro
 bool holder_alive(db::Store& store, const std::string& token, BeatWatch* watch) {
   const auto t = parse_token(token);
   if (!t) return false;
-  if (t->host == host()) return token == runner_token() || process_alive(*t);
+  if (on_this_host(t->host)) return token == runner_token() || process_alive(*t);
   const auto seen = store.last_seen(token);
   if (watch) return watch->alive(token, seen, db::unix_now(), watch_clock_s());
   return !seen || db::unix_now() - *seen < kRunnerLeaseS;
@@ -108,7 +126,7 @@ int requeue_dead_runners(db::Store& store, BeatWatch* watch) {
 
 std::string describe_holder(db::Store& store, const std::string& token, const BeatWatch* watch) {
   const auto t = parse_token(token);
-  if (t && t->host == host()) return token + " (this host)";
+  if (t && on_this_host(t->host)) return token + " (this host)";
   const auto seen = store.last_seen(token);
   if (!seen)
     return token + " (another host, no heartbeat: a demcal from before heartbeats; if it is gone, `demcal run JOB "

@@ -4,11 +4,19 @@
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
+#include <unistd.h>
 
 namespace demcal::jobs {
 
 PartFile::PartFile(std::string path) : path_(std::move(path)), part_(path_ + ".part") {}
 PartFile::PartFile(std::string path, std::string part) : path_(std::move(path)), part_(std::move(part)) {}
+
+PartFile PartFile::private_to_this_process(std::string path) {
+  char host[256] = {};
+  gethostname(host, sizeof host - 1);
+  std::string part = path + "." + host + "-" + std::to_string(::getpid()) + ".part";
+  return PartFile(std::move(path), std::move(part));
+}
 
 PartFile::~PartFile() {
   if (!done_) std::remove(part_.c_str());
@@ -17,7 +25,7 @@ PartFile::~PartFile() {
 void PartFile::commit(const std::string& what) {
   // On failure the part stays uncommitted, and the destructor removes it.
   if (std::rename(part_.c_str(), path_.c_str()) != 0)
-    throw std::runtime_error("cannot move the " + what + " into place at " + path_ + ": " + std::strerror(errno));
+    throw OutputWriteError("cannot move the " + what + " into place at " + path_ + ": " + std::strerror(errno));
   done_ = true;
 }
 

@@ -3,14 +3,26 @@
 // stopped mid-write, a full disk or a failed writer leaves nothing at the final path
 // that looks valid, and an earlier file there stays whole. Task HDF5 files, their
 // Xdmf descriptions and gnuplot's images are written this way.
+#include <stdexcept>
 #include <string>
 
 namespace demcal::jobs {
+
+// A task's file could not be written or moved into place (a full disk, a folder
+// made read-only or removed): every later task of the run would fail the same way,
+// after running, so the runner stops on it.
+class OutputWriteError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 class PartFile {
  public:
   // `part` is where the writer writes; by default `path` + ".part".
   explicit PartFile(std::string path);
+  // A part no other process writes: `path` + ".<host>-<pid>.part". For files that
+  // two runs may write at once (the same task in two databases sharing a folder).
+  static PartFile private_to_this_process(std::string path);
   PartFile(std::string path, std::string part);
   ~PartFile();  // removes a part that was not committed
   PartFile(const PartFile&) = delete;

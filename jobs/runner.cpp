@@ -9,6 +9,7 @@
 #include "worker.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -35,6 +36,13 @@ int usable_cores() {
   CPU_ZERO(&set);
   if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
   return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+// A runner token ("host/pidns...:pid:start") as part of a file name.
+std::string file_name_safe(std::string s) {
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '-';
+  return s;
 }
 
 struct Running {
@@ -92,6 +100,11 @@ class Runner {
   Counts counts_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
   bool superseded_ = false;  // another run recorded another spec under this job's name
+  std::string output_failure_;  // the first task that could not write into the output folder, and why
+  // In the result files' names: two databases whose runs share an output folder both
+  // number their tasks from 1, and a name of the task id alone let one run read the
+  // other's result as its own (metrics stored under the wrong task).
+  const std::string result_tag_ = file_name_safe(token_);
 };
 
 void Runner::prepare() {
@@ -206,8 +219,9 @@ void Runner::launch(const db::TaskRow& row) {
   t.threads = threads_;
   t.snapshots = job_.snapshots;
   t.h5_path = (dir_ / task_file_name(row.id, row.key)).string();
-  t.result_path = (dir_ / (".task-" + std::to_string(row.id) + ".result.json")).string();
-  std::filesystem::remove(t.result_path);
+  t.result_path = (dir_ / (".task-" + std::to_string(row.id) + "." + result_tag_ + ".result.json")).string();
+  std::error_code gone;  // the folder may be gone: the worker then says so
+  std::filesystem::remove(t.result_path, gone);
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
@@ -301,8 +315,9 @@ Eta Runner::eta() {
 void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - r.start).count();
   std::optional<db::Outcome> out;
-  if (WIFEXITED(wstatus) && WEXITSTATUS(wstatus) == 0) out = read_worker_result(r.result_path);
-  std::filesystem::remove(r.result_path);
+  if (worker_left_result(wstatus)) out = read_worker_result(r.result_path);
+  std::error_code gone;  // the folder may be gone: the worker then says so
+  std::filesystem::remove(r.result_path, gone);
   if (!out && stopping) {
     store_.release(r.task_id, token_, "interrupted; will be retried");
     progress_.line(describe_task(r.index, r.task_id) + " interrupted, back in the queue", counts());
@@ -314,7 +329,15 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
     out->wall_s = wall;
     out->error = worker_failure(wstatus, r.result_path);
   }
-  store_.finish(r.task_id, token_, *out);
+  if (worker_output_unwritable(wstatus) && output_failure_.empty())
+    output_failure_ = describe_task(r.index, r.task_id) + ": " + out->error;
+  if (!store_.finish(r.task_id, token_, *out)) {
+    // This run was judged gone (silent past the lease) and another took the task over.
+    progress_.line(describe_task(r.index, r.task_id) + " " + out->status + " here, but another runner took it over "
+                   "meanwhile (this run's heartbeat was judged stale): its result is that runner's, this one is dropped",
+                   counts());
+    return;
+  }
   ++ran_;
   busy_s_ += out->wall_s;
   measure_speed_now();
@@ -353,10 +376,11 @@ RunSummary Runner::run() {
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh;
+  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh, last_file_check = last_refresh;
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
-    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal()) {
+    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal() &&
+           output_failure_.empty()) {
       if (superseded()) {  // checked per task: the queued tasks left the job with the old spec
         queue_.clear();
         break;
@@ -366,6 +390,7 @@ RunSummary Runner::run() {
       if (store_.claim(row.id, token_)) launch(row);
     }
     reap(false);
+    if (!output_failure_.empty() && running_.empty()) break;  // the tasks left could not write their files either
     const bool idle = running_.empty() && queue_.empty();
     const auto now = std::chrono::steady_clock::now();
     heartbeat.tick();
@@ -378,6 +403,13 @@ RunSummary Runner::run() {
       if (int n = requeue_dead_runners(store_, &beats_)) {
         progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", counts());
         requeued = true;
+      }
+    }
+    if (now - last_file_check > std::chrono::seconds(2)) {
+      last_file_check = now;
+      if (const std::string lost = store_.file_lost(); !lost.empty()) {
+        s.database_lost = "the database " + store_.path() + " was " + lost + " while this run was writing it";
+        break;
       }
     }
     if (requeued || idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
@@ -401,11 +433,19 @@ RunSummary Runner::run() {
     stop_all();
     s.interrupted = true;
   }
+  if (s.database_lost.empty())  // checked every 2 s; a shorter run, or the last seconds, here
+    if (const std::string lost = store_.file_lost(); !lost.empty())
+      s.database_lost = "the database " + store_.path() + " was " + lost + " while this run was writing it";
+  if (!s.database_lost.empty()) {
+    *opt_.log << "\n" << s.database_lost << ": stopping " << running_.size() << " running task(s)\n";
+    stop_all();
+  }
   progress_.finish();
   const Counts c = counts();
   record_final_counts(c, s);
   s.ran = ran_;
   s.superseded = superseded_;
+  s.output_failure = output_failure_;
   return s;
 }
 

@@ -30,6 +30,12 @@ struct RunSummary {
   // Another run recorded a different job file under this job's name meanwhile: this
   // run stopped taking tasks, and the job's counts are that file's, not this one's.
   bool superseded = false;
+  // A task could not write its files into the output folder (disk full, folder not
+  // writable): this run started no more tasks. What happened, else empty.
+  std::string output_failure;
+  // The database file was deleted or replaced while this run wrote to it: the run
+  // stopped its tasks. What happened, else empty.
+  std::string database_lost;
 };
 
 // Records the job, re-queues tasks of dead runners, runs what is pending until

@@ -1,6 +1,7 @@
 #include "worker.hpp"
 
 #include "hdf5_writer.hpp"
+#include "part_file.hpp"
 #include "xdmf_writer.hpp"
 #include "scene_registry.hpp"
 
@@ -107,8 +108,13 @@ int run_worker(const WorkerTask& t) {
   test_abort_hook(t.index);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json out;
+  bool output_written = true;
   try {
     out = run_scene(t);
+  } catch (const OutputWriteError& e) {
+    out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
+           {"artifacts", nlohmann::json::array()}};
+    output_written = false;
   } catch (const std::exception& e) {
     out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
            {"artifacts", nlohmann::json::array()}};
@@ -125,9 +131,18 @@ int run_worker(const WorkerTask& t) {
     }
   }
   // rename is atomic: the parent sees a whole result or none.
-  if (std::rename(tmp.c_str(), t.result_path.c_str()) == 0) return 0;
+  if (std::rename(tmp.c_str(), t.result_path.c_str()) == 0) return output_written ? 0 : kWorkerOutputUnwritable;
   std::remove(tmp.c_str());
   return kWorkerResultUnwritable;
+}
+
+bool worker_left_result(int wait_status) {
+  return WIFEXITED(wait_status) && (WEXITSTATUS(wait_status) == 0 || WEXITSTATUS(wait_status) == kWorkerOutputUnwritable);
+}
+
+bool worker_output_unwritable(int wait_status) {
+  return WIFEXITED(wait_status) &&
+         (WEXITSTATUS(wait_status) == kWorkerResultUnwritable || WEXITSTATUS(wait_status) == kWorkerOutputUnwritable);
 }
 
 std::string worker_failure(int wait_status, const std::string& result_path) {
@@ -167,7 +182,8 @@ std::optional<db::Outcome> parse_worker_result(const std::string& text) {
 }
 
 std::string run_forked(const WorkerTask& t, double tick_s, const std::function<void()>& tick) {
-  std::filesystem::remove(t.result_path);
+  std::error_code gone;  // the folder may be gone: the worker then says so
+  std::filesystem::remove(t.result_path, gone);
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
@@ -199,13 +215,13 @@ std::string run_forked(const WorkerTask& t, double tick_s, const std::function<v
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::string text;
-  if (WIFEXITED(st) && WEXITSTATUS(st) == 0) {
+  if (worker_left_result(st)) {
     std::ifstream f(t.result_path);
     std::stringstream buf;
     buf << f.rdbuf();
     text = buf.str();
   }
-  std::filesystem::remove(t.result_path);
+  std::filesystem::remove(t.result_path, gone);
   if (!text.empty() && parse_worker_result(text)) return text;
   const std::string error = worker_failure(st, t.result_path);
   const nlohmann::json out = {{"status", "failed"}, {"error", error}, {"wall_s", wall},

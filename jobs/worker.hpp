@@ -39,6 +39,13 @@ int run_worker(const WorkerTask& task);
 // The exit status of a worker that ran its task but could not write the result
 // file (disk full, folder gone): the parent says so instead of "no result".
 constexpr int kWorkerResultUnwritable = 3;
+// The exit status of a worker that wrote its result (the task failed, saying why)
+// but not the task's HDF5 or Xdmf file.
+constexpr int kWorkerOutputUnwritable = 5;
+// Whether a worker that ended with `wait_status` left a result to read.
+bool worker_left_result(int wait_status);
+// Whether it could not write into the output folder: the tasks after it would not either.
+bool worker_output_unwritable(int wait_status);
 // Why a worker that left no result failed, from its wait status.
 std::string worker_failure(int wait_status, const std::string& result_path);
 

@@ -91,7 +91,7 @@ void write_snapshot_xdmf(const std::string& path, const std::string& h5_name, co
     std::ofstream f(file.part(), std::ios::trunc);
     f << snapshot_xdmf(h5_name, snapshots);
     f.close();
-    if (!f) throw std::runtime_error("cannot write the Xdmf file " + file.part() + ": " + std::strerror(errno));
+    if (!f) throw OutputWriteError("cannot write the Xdmf file " + file.part() + ": " + std::strerror(errno));
   }
   file.commit("Xdmf file");
 }

@@ -158,6 +158,96 @@ TEST(Runner, TwoRunnersOfOneJobShareItsTasksAndRunEachOnce) {
   EXPECT_EQ(tasks_of(d.file("demcal.db")).size(), 6u) << "no duplicate tasks";
 }
 
+TEST(Runner, AnOutputFolderThatCannotBeWrittenStopsTheRun) {
+  // A full disk or a folder gone: the running task cannot write its files, and every
+  // task after it would run to the end and fail the same way. The run stops taking
+  // tasks, says why and how to go on, and leaves the rest pending.
+  TempDir d;
+  write(d.file("j.json"), collision_job("gone", {0.05, 0.06, 0.07, 0.08, 0.09}, 150, 30000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  bool seen_running = false;
+  for (int i = 0; i < 3000 && !seen_running; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (!fs::exists(db)) continue;
+    try {
+      seen_running = count_status(tasks_of(db, "gone"), "running") == 1;
+    } catch (const std::exception&) {
+    }
+  }
+  ASSERT_TRUE(seen_running) << "no task was seen running within 60 s";
+  const fs::path out = fs::path(d.file("demcal-out")) / "gone";
+  fs::rename(out, d.file("moved-away"));
+  write(out.string(), "a file where the folder was\n");
+  const Result r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("demcal: error: stopped: task "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--retry-failed"), std::string::npos) << r.err;
+  const auto rows = tasks_of(db, "gone");
+  EXPECT_EQ(count_status(rows, "running"), 0);
+  EXPECT_EQ(count_status(rows, "failed"), 1) << "the task that could not write, and no other";
+  EXPECT_GE(count_status(rows, "pending"), 1) << "the tasks after it were not started";
+}
+
+TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
+  // SQLite writes on into an unlinked file: without a check the run ended "done"
+  // with every result gone with the file.
+  TempDir d;
+  write(d.file("j.json"), collision_job("lost", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  bool seen_running = false;
+  for (int i = 0; i < 3000 && !seen_running; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (!fs::exists(db)) continue;
+    try {
+      seen_running = count_status(tasks_of(db, "lost"), "running") == 1;
+    } catch (const std::exception&) {
+    }
+  }
+  ASSERT_TRUE(seen_running) << "no task was seen running within 60 s";
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
+  const Result r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("demcal: error: the database demcal.db was deleted while this run was writing it"),
+            std::string::npos) << r.err;
+}
+
+TEST(Runner, TwoDatabasesSharingAnOutputFolderKeepTheirOwnResults) {
+  // Two databases in one folder share the default demcal-out/, and both number their
+  // tasks from 1. With result files named by task id alone, runs of one job name into
+  // both at once read each other's results: one stored the other's metrics under its
+  // own tasks, or failed tasks that had run. Each database must hold what a run of
+  // its job alone gives, key for key.
+  TempDir d;
+  const std::vector<double> fa = {0.05, 0.1, 0.15, 0.2}, fb = {0.3, 0.35, 0.4, 0.45};
+  write(d.file("a.json"), collision_job("same", fa, 40, 1500));
+  write(d.file("b.json"), collision_job("same", fb, 40, 1500));
+  ASSERT_EQ(run_demcal({"run", "a.json", "--db", "ref-a.db", "--out", "ref"}, d.path.string()).rc, 0);
+  ASSERT_EQ(run_demcal({"run", "b.json", "--db", "ref-b.db", "--out", "ref"}, d.path.string()).rc, 0);
+  auto metrics_by_key = [&](const std::string& db) {
+    std::map<std::string, std::string> m;
+    const Result q = run_demcal({"query", "--db", db, "--job", "same", "--metrics", "dt,energy_final",
+                                 "--format", "csv"}, d.path.string());
+    EXPECT_EQ(q.rc, 0) << q.err;
+    for (const auto& t : tasks_of(d.file(db), "same")) m[t.key] = t.status;
+    m["csv"] = q.out.substr(q.out.find('\n') + 1);  // the rows, without the header
+    return m;
+  };
+  const auto ref_a = metrics_by_key("ref-a.db"), ref_b = metrics_by_key("ref-b.db");
+  for (int round = 0; round < 4; ++round) {
+    fs::remove_all(d.path / "demcal-out");
+    for (const char* f : {"a.db", "b.db"}) fs::remove(d.file(f));
+    const pid_t pa = spawn({"run", "a.json", "--db", "a.db", "--workers", "1"}, d.path.string(), {}, "a");
+    const pid_t pb = spawn({"run", "b.json", "--db", "b.db", "--workers", "1"}, d.path.string(), {}, "b");
+    const Result ra = finish(pa, d.path.string(), "a"), rb = finish(pb, d.path.string(), "b");
+    ASSERT_EQ(ra.rc, 0) << ra.err;
+    ASSERT_EQ(rb.rc, 0) << rb.err;
+    EXPECT_EQ(metrics_by_key("a.db"), ref_a) << "round " << round;
+    EXPECT_EQ(metrics_by_key("b.db"), ref_b) << "round " << round;
+  }
+}
+
 TEST(Runner, TwoJobsConcurrentlyOnOneDatabase) {
   TempDir d;
   write(d.file("a.json"), collision_job("a", {0.05, 0.1, 0.15}, 60, 2000));

@@ -91,6 +91,24 @@ TEST(Liveness, ARunnerOnThisHostIsJudgedByItsProcess) {
   const std::string mine = runner_token();
   const std::string host = mine.substr(0, mine.find(':'));
   EXPECT_FALSE(holder_alive(s, host + ":" + std::to_string(getpid()) + ":1"));
+  // A token from before the pid namespace was part of the host: judged by its process too.
+  const std::string bare = host.substr(0, host.find("/pidns"));
+  EXPECT_FALSE(holder_alive(s, bare + ":" + std::to_string(getpid()) + ":1"));
+}
+
+TEST(Liveness, ARunnerInAnotherPidNamespaceOfThisHostIsJudgedByItsHeartbeat) {
+  // Two containers sharing a hostname: the other's pid means nothing here, so its
+  // heartbeat decides, as for another host.
+  demcal::test::TempDir d;
+  db::Store s(d.file("a.db"));
+  const std::string mine = runner_token();
+  const std::string host = mine.substr(0, mine.find(':'));
+  ASSERT_NE(host.find("/pidns"), std::string::npos) << mine;
+  const std::string bare = host.substr(0, host.find("/pidns"));
+  const std::string other = bare + "/pidns1:" + std::to_string(getpid()) + ":1";  // a pid that is not that runner here
+  { Heartbeat beat(s, other); }  // beats now
+  EXPECT_TRUE(holder_alive(s, other)) << "a fresh heartbeat, whatever this namespace's pid says";
+  EXPECT_NE(describe_holder(s, other, nullptr).find("another host"), std::string::npos);
 }
 
 }  // namespace

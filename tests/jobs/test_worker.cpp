@@ -10,6 +10,8 @@
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
+#include <csignal>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -68,7 +70,8 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
   write_task_hdf5(ok, {"collision", "abcdef0123456789", 1, "failed", "unstable in stage run: energy grew"}, {{"seed", 1}}, {s}, {});
   EXPECT_EQ(read_task_key(ok), "abcdef0123456789");
   EXPECT_EQ(read_series(ok, "energy").rows.size(), 2u);
-  EXPECT_FALSE(std::filesystem::exists(ok + ".part"));
+  for (const auto& e : std::filesystem::directory_iterator(d.path))
+    EXPECT_EQ(e.path().extension(), ".h5") << "left beside it: " << e.path();
   {  // a failed run's file says so, with the reason
     H5::H5File f(ok, H5F_ACC_RDONLY);
     std::string status, message;
@@ -78,10 +81,9 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
     EXPECT_EQ(status, "failed");
     EXPECT_EQ(message, "unstable in stage run: energy grew");
   }
-  // The file cannot be made (a folder in the way of its .part): an exception naming
-  // the path, not an abort, and no file at the path.
-  const std::string bad = d.file("2-abcdef02.h5");
-  std::filesystem::create_directories(bad + ".part");
+  // The file cannot be made (its folder is gone): an exception naming the path, not
+  // an abort, and no file at the path.
+  const std::string bad = d.file("gone/2-abcdef02.h5");
   try {
     write_task_hdf5(bad, {"collision", "abcdef0223456789", 2, "done", ""}, {}, {s}, {});
     FAIL() << "no exception";
@@ -89,6 +91,42 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
     EXPECT_NE(std::string(e.what()).find("cannot write the HDF5 file " + bad), std::string::npos) << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(bad));
+}
+
+// A disk that fills while the file is written (here a file-size limit, which makes
+// write() fail as a full disk does): an exception naming the path and the likely
+// cause, no crash, no .part left. HDF5 reports the failure when the file is closed,
+// and a second close of that file (the C++ destructor's) crashed the worker with
+// SIGSEGV. In a child process, so that the limit and a crash stay there.
+TEST(TaskFile, AFullDiskMidWriteIsAnErrorNotACrash) {
+  demcal::test::TempDir d;
+  const std::string path = d.file("3-abcdef03.h5");
+  engine::Series s;
+  s.name = "energy";
+  s.columns = {"t", "e"};
+  for (int i = 0; i < 200000; ++i) s.rows.push_back({i * 1e-3, std::sin(i * 0.37)});  // ~3 MB, poorly compressible
+  for (rlim_t limit : {rlim_t(8) << 10, rlim_t(64) << 10, rlim_t(512) << 10}) {
+    const pid_t pid = fork();
+    if (pid == 0) {
+      std::signal(SIGXFSZ, SIG_IGN);  // write() then fails with EFBIG instead of killing
+      const rlimit lim{limit, limit};
+      if (setrlimit(RLIMIT_FSIZE, &lim) != 0) _exit(3);
+      try {
+        write_task_hdf5(path, {"collision", "abcdef0323456789", 3, "done", ""}, {}, {s}, {});
+      } catch (const std::runtime_error& e) {
+        const bool named = std::string(e.what()).find("cannot write the HDF5 file " + path) != std::string::npos;
+        _exit(named ? 0 : 4);
+      }
+      _exit(5);  // written whole within the limit: the test's premise failed
+    }
+    int st = 0;
+    ASSERT_EQ(waitpid(pid, &st, 0), pid);
+    ASSERT_TRUE(WIFEXITED(st)) << "limit " << limit << ": killed by signal " << WTERMSIG(st);
+    EXPECT_EQ(WEXITSTATUS(st), 0) << "limit " << limit << " (4: message without the path, 5: no error)";
+    EXPECT_FALSE(std::filesystem::exists(path)) << "limit " << limit;
+    for (const auto& e : std::filesystem::directory_iterator(d.path))
+      EXPECT_EQ(e.path().extension(), ".h5") << "limit " << limit << ": left behind: " << e.path();
+  }
 }
 
 // A worker that ran its task but cannot write the result (a full disk; here a
