@@ -286,6 +286,9 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
           continue;
         }
         std::optional<db::Outcome> out = parse_worker_result(text.substr(nl + 1));
+        if (out && s.output_failure.empty() &&
+            nlohmann::json::parse(text.substr(nl + 1)).value(kOutputUnwritableKey, false))
+          s.output_failure = describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + ": " + out->error;
         if (!out) {
           fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
         } else {
@@ -331,6 +334,10 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (!k.ready || k.lost || k.stopped) continue;
+      if (!s.output_failure.empty()) {  // the tasks left could not write their files either
+        if (!k.task) stop_rank(r);
+        continue;
+      }
       while (!queue.empty() && !k.task) {
         // Another run recorded a different job file under this name: the queued
         // tasks left the job, so none more is handed out.
@@ -400,7 +407,9 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     }
   }
   g_dismissed = true;
-  if (!queue.empty() && !s.interrupted)
+  if (const std::string lost = store.file_lost(); !lost.empty())
+    s.database_lost = "the database " + store.path() + " was " + lost + " while this run was writing it";
+  if (!queue.empty() && !s.interrupted && s.output_failure.empty())
     log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
   progress.finish();
   const Counts c = counts();

@@ -222,10 +222,15 @@ std::string run_forked(const WorkerTask& t, double tick_s, const std::function<v
     text = buf.str();
   }
   std::filesystem::remove(t.result_path, gone);
-  if (!text.empty() && parse_worker_result(text)) return text;
-  const std::string error = worker_failure(st, t.result_path);
-  const nlohmann::json out = {{"status", "failed"}, {"error", error}, {"wall_s", wall},
-                              {"metrics", nlohmann::json::array()}, {"artifacts", nlohmann::json::array()}};
+  nlohmann::json out;
+  if (!text.empty() && parse_worker_result(text)) {
+    if (!worker_output_unwritable(st)) return text;
+    out = nlohmann::json::parse(text);
+  } else {
+    out = {{"status", "failed"}, {"error", worker_failure(st, t.result_path)}, {"wall_s", wall},
+           {"metrics", nlohmann::json::array()}, {"artifacts", nlohmann::json::array()}};
+  }
+  if (worker_output_unwritable(st)) out[kOutputUnwritableKey] = true;  // rank 0 stops handing out work
   return out.dump();
 }
 

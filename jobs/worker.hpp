@@ -57,8 +57,10 @@ std::optional<db::Outcome> parse_worker_result(const std::string& text);
 // Runs the task in a forked child, as the local runner does (a crash fails the
 // task only), waiting for it while calling `tick` about every tick_s seconds (the
 // MPI heartbeat). Returns the result's JSON text; when the child left none, a
-// failed result naming the signal or exit status. task.result_path is used and
-// removed.
+// failed result naming the signal or exit status; with kOutputUnwritableKey true
+// when the child could not write into the output folder. task.result_path is used
+// and removed.
+constexpr const char* kOutputUnwritableKey = "output_unwritable";
 std::string run_forked(const WorkerTask& task, double tick_s, const std::function<void()>& tick);
 
 }  // namespace demcal::jobs
