@@ -86,7 +86,7 @@ std::string snapshot_xdmf(const std::string& h5_name, const std::vector<Snapshot
 }
 
 void write_snapshot_xdmf(const std::string& path, const std::string& h5_name, const std::vector<Snapshot>& snapshots) {
-  PartFile file(path);
+  PartFile file = PartFile::private_to_this_process(path);  // two runs may describe one task at once
   {
     std::ofstream f(file.part(), std::ios::trunc);
     f << snapshot_xdmf(h5_name, snapshots);

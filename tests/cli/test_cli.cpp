@@ -414,17 +414,19 @@ std::pair<fs::path, std::string> run_with_snapshots(const TempDir& d, const std:
 TEST(Cli, AnXdmfThatCannotBeWrittenIsAWarningNotALostTask) {
   TempDir d;
   const auto [h5, xmf] = run_with_snapshots(d, "xw");
-  // The same task from scratch, with a folder where the .xmf is written first.
+  // The same task from scratch, with a folder (not empty) where the .xmf goes.
   fs::remove(d.file("demcal.db"));
   fs::remove_all(d.path / "demcal-out");
-  fs::create_directories(xmf + ".part");
+  fs::create_directories(xmf + "/in-the-way");
   const Result r = run_demcal({"run", "xw.json"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   const auto again = tasks_of(d.file("demcal.db"), "xw").at(0);
   EXPECT_EQ(again.status, "done");
-  EXPECT_NE(again.error.find("cannot write the Xdmf file " + xmf + ".part"), std::string::npos) << again.error;
+  EXPECT_NE(again.error.find("cannot move the Xdmf file into place at " + xmf), std::string::npos) << again.error;
   EXPECT_TRUE(fs::exists(h5));
-  EXPECT_FALSE(fs::exists(xmf));
+  EXPECT_TRUE(fs::is_directory(xmf)) << "the folder in the way is left alone";
+  for (const auto& e : fs::directory_iterator(fs::path(xmf).parent_path()))
+    EXPECT_EQ(e.path().string().find(".part"), std::string::npos) << "left behind: " << e.path();
   const Result q = run_demcal({"query", "--job", "xw", "--format", "json"}, d.path.string());
   ASSERT_EQ(q.rc, 0) << q.err;
   const json row = json::parse(q.out).at(0);
