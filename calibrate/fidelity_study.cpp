@@ -2,11 +2,6 @@
 #include "study.hpp"
 #include "study_support.hpp"
 
-#include "jobs/job_error.hpp"
-#include "jobs/job_spec.hpp"
-#include "jobs/query.hpp"
-#include "jobs/runner.hpp"
-#include "jobs/series_plot.hpp"
 
 #include <algorithm>
 #include <map>
@@ -20,17 +15,6 @@
 namespace demcal::calibrate {
 namespace fs = std::filesystem;
 using namespace study_support;
-using jobs::Job;
-using jobs::JobError;
-using jobs::parse_job;
-using jobs::RunOptions;
-using jobs::RunSummary;
-using jobs::run_job;
-using jobs::select_rows;
-using jobs::ImageFile;
-using jobs::gnuplot_quoted;
-using jobs::gnuplot_png_terminal;
-using jobs::run_gnuplot_script;
 namespace {
 struct KnobDef {
   std::string name;

@@ -2,11 +2,6 @@
 #include "study.hpp"
 #include "study_support.hpp"
 
-#include "jobs/job_error.hpp"
-#include "jobs/job_spec.hpp"
-#include "jobs/query.hpp"
-#include "jobs/runner.hpp"
-#include "jobs/series_plot.hpp"
 
 #include "engine/scenes/grazing_impact.hpp"
 
@@ -22,10 +17,6 @@
 namespace demcal::calibrate {
 namespace fs = std::filesystem;
 using namespace study_support;
-using jobs::ImageFile;
-using jobs::gnuplot_quoted;
-using jobs::gnuplot_png_terminal;
-using jobs::run_gnuplot_script;
 
 GrazingStudy run_grazing_study(const StudyOptions& o) {
   GrazingStudy s;

@@ -1,7 +1,12 @@
 #pragma once
-// What the study files share: checked writes of their tables and charts, a stored
-// metric by name, and numbers as the charts and advice print them.
+// What the study files share: the runner and gnuplot they use, checked writes of
+// their tables and charts, a stored metric by name, and numbers as the charts and
+// advice print them.
+#include "jobs/job_error.hpp"
+#include "jobs/job_spec.hpp"
 #include "jobs/query.hpp"
+#include "jobs/runner.hpp"
+#include "jobs/series_plot.hpp"
 
 #include <cmath>
 #include <fstream>
@@ -11,6 +16,18 @@
 #include <string>
 
 namespace demcal::calibrate::study_support {
+
+using jobs::Job;
+using jobs::JobError;
+using jobs::parse_job;
+using jobs::RunOptions;
+using jobs::RunSummary;
+using jobs::run_job;
+using jobs::select_rows;
+using jobs::ImageFile;
+using jobs::gnuplot_quoted;
+using jobs::gnuplot_png_terminal;
+using jobs::run_gnuplot_script;
 
 // A study's tables, advice and job files are its result: a write that fails (disk
 // full, a folder or a device in the way) is an error, not a "wrote" line.

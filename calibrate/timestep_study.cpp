@@ -2,11 +2,6 @@
 #include "study.hpp"
 #include "study_support.hpp"
 
-#include "jobs/job_error.hpp"
-#include "jobs/job_spec.hpp"
-#include "jobs/query.hpp"
-#include "jobs/runner.hpp"
-#include "jobs/series_plot.hpp"
 
 #include "engine/timestep.hpp"
 
@@ -22,16 +17,6 @@
 namespace demcal::calibrate {
 namespace fs = std::filesystem;
 using namespace study_support;
-using jobs::Job;
-using jobs::parse_job;
-using jobs::RunOptions;
-using jobs::RunSummary;
-using jobs::run_job;
-using jobs::select_rows;
-using jobs::ImageFile;
-using jobs::gnuplot_quoted;
-using jobs::gnuplot_png_terminal;
-using jobs::run_gnuplot_script;
 namespace {
 
 // Relative energy drift per simulated second the recommendation accepts: 10% of

@@ -16,6 +16,20 @@ int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string
   for (const auto& r : rows) n += r.status == status;
   return n;
 }
+
+// Waits (up to 60 s) until one task of `job` in `db` is running; false if none was seen.
+bool one_task_seen_running(const std::string& db, const std::string& job) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      if (fs::exists(db) && count_status(tasks_of(db, job), "running") == 1) return true;
+    } catch (const std::exception&) {
+      // the runner has made the file but not yet its tables
+    }
+  }
+  return false;
+}
 }  // namespace
 
 TEST(Runner, CrashingWorkerFailsOnlyItsTask) {
@@ -118,16 +132,7 @@ TEST(Runner, SigtermStopsRunningTasksForRetry) {
   write(d.file("j.json"), collision_job("term", {0.05, 0.06, 0.07, 0.08}, 150, 6000));
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  bool seen_running = false;
-  while (!seen_running && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    try {
-      seen_running = fs::exists(db) && count_status(tasks_of(db, "term"), "running") == 1;
-    } catch (const std::exception&) {
-    }
-  }
-  ASSERT_TRUE(seen_running) << "no task was seen running within 60 s";
+  ASSERT_TRUE(one_task_seen_running(db, "term")) << "no task was seen running within 60 s";
   kill(runner, SIGTERM);
   const Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
@@ -166,16 +171,7 @@ TEST(Runner, AnOutputFolderThatCannotBeWrittenStopsTheRun) {
   write(d.file("j.json"), collision_job("gone", {0.05, 0.06, 0.07, 0.08, 0.09}, 150, 30000));
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  bool seen_running = false;
-  for (int i = 0; i < 3000 && !seen_running; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    if (!fs::exists(db)) continue;
-    try {
-      seen_running = count_status(tasks_of(db, "gone"), "running") == 1;
-    } catch (const std::exception&) {
-    }
-  }
-  ASSERT_TRUE(seen_running) << "no task was seen running within 60 s";
+  ASSERT_TRUE(one_task_seen_running(db, "gone")) << "no task was seen running within 60 s";
   const fs::path out = fs::path(d.file("demcal-out")) / "gone";
   fs::rename(out, d.file("moved-away"));
   write(out.string(), "a file where the folder was\n");
@@ -196,16 +192,7 @@ TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
   write(d.file("j.json"), collision_job("lost", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  bool seen_running = false;
-  for (int i = 0; i < 3000 && !seen_running; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    if (!fs::exists(db)) continue;
-    try {
-      seen_running = count_status(tasks_of(db, "lost"), "running") == 1;
-    } catch (const std::exception&) {
-    }
-  }
-  ASSERT_TRUE(seen_running) << "no task was seen running within 60 s";
+  ASSERT_TRUE(one_task_seen_running(db, "lost")) << "no task was seen running within 60 s";
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
   const Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
