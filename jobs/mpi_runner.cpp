@@ -407,8 +407,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     }
   }
   g_dismissed = true;
-  if (const std::string lost = store.file_lost(); !lost.empty())
-    s.database_lost = "the database " + store.path() + " was " + lost + " while this run was writing it";
+  s.database_lost = database_lost(store);
   if (!queue.empty() && !s.interrupted && s.output_failure.empty())
     log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
   progress.finish();

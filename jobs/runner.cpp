@@ -407,10 +407,8 @@ RunSummary Runner::run() {
     }
     if (now - last_file_check > std::chrono::seconds(2)) {
       last_file_check = now;
-      if (const std::string lost = store_.file_lost(); !lost.empty()) {
-        s.database_lost = "the database " + store_.path() + " was " + lost + " while this run was writing it";
-        break;
-      }
+      s.database_lost = database_lost(store_);
+      if (!s.database_lost.empty()) break;
     }
     if (requeued || idle || (queue_.empty() && now - last_refresh > std::chrono::seconds(2))) {
       last_refresh = now;
@@ -433,9 +431,7 @@ RunSummary Runner::run() {
     stop_all();
     s.interrupted = true;
   }
-  if (s.database_lost.empty())  // checked every 2 s; a shorter run, or the last seconds, here
-    if (const std::string lost = store_.file_lost(); !lost.empty())
-      s.database_lost = "the database " + store_.path() + " was " + lost + " while this run was writing it";
+  if (s.database_lost.empty()) s.database_lost = database_lost(store_);  // a run shorter than the 2 s, or its end
   if (!s.database_lost.empty()) {
     *opt_.log << "\n" << s.database_lost << ": stopping " << running_.size() << " running task(s)\n";
     stop_all();
@@ -480,6 +476,11 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
           << kept << ". Give the job another name to keep both\n";
   }
   return id;
+}
+
+std::string database_lost(const db::Store& store) {
+  const std::string lost = store.file_lost();
+  return lost.empty() ? "" : "the database " + store.path() + " was " + lost + " while this run was writing it";
 }
 
 void make_folder(const std::string& dir, const std::string& flag, const std::string& what) {

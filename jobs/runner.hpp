@@ -48,6 +48,9 @@ RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 // index) and returns its id. When the job's spec changed since the last run into
 // this database, says on `log` which tasks of the earlier spec it no longer holds.
 std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log);
+// Empty while the database file `store` opened is still at its path; else a sentence
+// saying it was deleted or replaced during the run.
+std::string database_lost(const db::Store& store);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
 // Creates `dir` and its parents: throws JobError(flag) naming the `what` ("folder",
