@@ -4,6 +4,7 @@
 #include "hdf5_writer.hpp"
 #include "job_error.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -70,10 +71,33 @@ std::string hidden_part_of(const std::string& out) {
 
 ImageFile::ImageFile(const std::string& out) : file_(out, hidden_part_of(out)) {}
 
+namespace {
+// Whether an image gnuplot wrote ends as a whole one does: gnuplot exits 0 when a
+// write fails (a full disk), leaving a truncated PNG or SVG that must not replace
+// an earlier whole chart.
+bool image_is_whole(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  f.seekg(0, std::ios::end);
+  const std::streamoff size = f.tellg();
+  const std::string ext = extension_of(path);
+  const std::streamoff tail = std::min<std::streamoff>(size, 64);
+  std::string end(static_cast<std::size_t>(tail), '\0');
+  f.seekg(size - tail);
+  f.read(end.data(), tail);
+  if (!f) return false;
+  if (ext == ".png") return end.size() >= 8 && end.compare(end.size() - 8, 8, std::string("IEND\xae\x42\x60\x82", 8)) == 0;
+  if (ext == ".svg") return end.find("</svg>") != std::string::npos;
+  return true;
+}
+}  // namespace
+
 void ImageFile::commit() {
   std::error_code ec;
   if (!std::filesystem::exists(part(), ec) || std::filesystem::file_size(part(), ec) == 0 || ec)
     throw std::runtime_error("gnuplot wrote nothing for " + file_.path());
+  if (!image_is_whole(part()))
+    throw std::runtime_error("gnuplot's image for " + file_.path() +
+                             " is cut short (disk full?); the earlier file there, if any, is kept");
   file_.commit("image");
 }
 

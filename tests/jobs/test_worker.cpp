@@ -2,6 +2,7 @@
 // behind is all the parent learns of it.
 #include "../temp_dir.hpp"
 #include "jobs/hdf5_writer.hpp"
+#include "jobs/series_plot.hpp"
 #include "jobs/worker.hpp"
 
 #include <H5Cpp.h>
@@ -9,6 +10,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <csignal>
 #include <sys/resource.h>
@@ -159,3 +162,54 @@ TEST(WorkerResult, AResultThatCannotBeWrittenIsNamedAndLeavesNoTmp) {
 
 }  // namespace
 }  // namespace demcal::jobs
+
+namespace {
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << text;
+}
+std::string read_text(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+}  // namespace
+
+// gnuplot exits 0 when its write fails (a full disk): a PNG without its IEND chunk
+// or an SVG without its end must not replace the earlier whole chart.
+TEST(ImageFile, ACutShortImageIsRefusedAndTheEarlierOneKept) {
+  demcal::test::TempDir d;
+  const std::string png = d.file("chart.png");
+  const std::string whole_png = std::string("\x89PNG\r\n\x1a\n", 8) + "...pixels..." +
+                                std::string("\0\0\0\0IEND\xae\x42\x60\x82", 12);
+  write_text(png, whole_png);
+  {
+    demcal::jobs::ImageFile image(png);
+    write_text(image.part(), whole_png.substr(0, whole_png.size() - 20));  // cut short
+    try {
+      image.commit();
+      FAIL() << "a cut-short PNG was committed";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("is cut short"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(read_text(png), whole_png) << "the earlier chart is kept";
+  {
+    demcal::jobs::ImageFile image(png);
+    write_text(image.part(), whole_png + "");
+    image.commit();
+  }
+  const std::string svg = d.file("chart.svg");
+  {
+    demcal::jobs::ImageFile image(svg);
+    write_text(image.part(), "<svg><g></g>");
+    EXPECT_THROW(image.commit(), std::runtime_error);
+  }
+  EXPECT_FALSE(std::filesystem::exists(svg));
+  {
+    demcal::jobs::ImageFile image(svg);
+    write_text(image.part(), "<svg><g></g></svg>\n");
+    image.commit();
+  }
+  EXPECT_TRUE(std::filesystem::exists(svg));
+  for (const auto& e : std::filesystem::directory_iterator(d.path))
+    EXPECT_EQ(e.path().filename().string().find(".part"), std::string::npos) << "left behind: " << e.path();
+}
