@@ -126,6 +126,10 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
 // the database or the job file (a slip of the hand) would destroy the results.
 void refuse_to_overwrite(const SlurmArgs& a) {
   std::error_code ec;
+  // The database need not exist yet: the script at its path would be found by the
+  // merge, after every shard ran, as "not a SQLite database".
+  if (fs::weakly_canonical(fs::absolute(a.out), ec) == fs::weakly_canonical(fs::absolute(a.db), ec))
+    throw jobs::JobError("--out", a.out + " is the database (--db) the shards merge into; the script needs a name of its own");
   if (!fs::exists(a.out, ec)) return;
   for (const auto& [other, what] : {std::pair{a.db, "the database (--db)"}, std::pair{a.job, "the job file"}})
     if (fs::exists(other, ec) && fs::equivalent(a.out, other, ec))

@@ -178,6 +178,11 @@ TEST(BadPaths, TheBatchScriptNeverReplacesTheDatabaseTheJobFileOrAnotherFile) {
   Result r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "ok.db"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--out: ok.db is the database (--db)"), std::string::npos) << r.err;
+  // A database not made yet: the script there would meet the merge after every shard ran.
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "later.db", "--out", "later.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: later.db is the database (--db)"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("later.db")));
   r = run_demcal({"slurm", "j.json", "--array", "2", "--db", "ok.db", "--out", "./j.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("is the job file"), std::string::npos) << r.err;
