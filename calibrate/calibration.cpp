@@ -504,6 +504,16 @@ void run_round(db::Store& store, const jobs::Job& sub, const std::string& out_di
     throw std::runtime_error("refinement " + sub.name +
                              ": another `demcal fit --refine` recorded this round with other points while it ran; "
                              "finished runs of both are kept, and --refine again goes on from the last round");
+  // Not a round with holes: the runs did not happen, and a round stored on them
+  // would read as converged (it moved nothing) and end the refinement.
+  if (!s.database_lost.empty()) throw std::runtime_error("refinement " + sub.name + ": " + s.database_lost);
+  if (!s.output_failure.empty())
+    throw std::runtime_error("refinement " + sub.name + " stopped: " + s.output_failure +
+                             "; free space in (or fix) " + out_dir + ", then --refine again: the round's runs are pending");
+  if (s.unfinished > 0)
+    throw std::runtime_error("refinement " + sub.name + ": " + std::to_string(s.unfinished) + " of " +
+                             std::to_string(s.total) + " run(s) unfinished (held by another runner?); --refine again "
+                             "finishes the round first");
   if (s.failed > 0) *ro.log << "refine: " << s.failed << " of " << s.total << " run(s) failed; they are holes\n";
 }
 

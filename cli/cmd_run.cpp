@@ -85,9 +85,9 @@ int run(const RunArgs& a) {
     std::cerr << "why they failed: demcal status --db " << a.db << " --job " << job.name
               << "; to run them again: demcal run " << a.job << same << " --retry-failed\n";
   if (!s.output_failure.empty())
-    std::cerr << "demcal: error: stopped: " << s.output_failure << ". The tasks not yet started were left pending; "
-              << "free space in (or fix) the output folder " << jobs::task_output_dir(job, opt)
-              << ", then: demcal run " << a.job << same << " --retry-failed\n";
+    std::cerr << "demcal: error: stopped: " << s.output_failure << ". That task and those not yet started are "
+              << "pending; free space in (or fix) the output folder " << jobs::task_output_dir(job, opt)
+              << ", then: demcal run " << a.job << same << "\n";
   else if (s.unfinished > 0 && !s.interrupted)
     std::cerr << "unfinished tasks are held by another runner (demcal status --db " << a.db
               << "); if none is at work on them any more: demcal run " << a.job << same << " --requeue-running\n";

@@ -286,9 +286,17 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
           continue;
         }
         std::optional<db::Outcome> out = parse_worker_result(text.substr(nl + 1));
-        if (out && s.output_failure.empty() &&
-            nlohmann::json::parse(text.substr(nl + 1)).value(kOutputUnwritableKey, false))
-          s.output_failure = describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + ": " + out->error;
+        if (out && nlohmann::json::parse(text.substr(nl + 1)).value(kOutputUnwritableKey, false)) {
+          // Not the task's failure: back to the queue, for the run after the folder is fixed.
+          const std::string what = describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id);
+          if (s.output_failure.empty()) s.output_failure = what + ": " + out->error;
+          store.release(k.task->id, token, "could not write its files: " + out->error + "; will be retried");
+          --live.running;
+          progress.line(what + " could not write its files, back in the queue: " + out->error, live);
+          k.task.reset();
+          k.ready = true;
+          continue;
+        }
         if (!out) {
           fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
         } else {

@@ -329,8 +329,14 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
     out->wall_s = wall;
     out->error = worker_failure(wstatus, r.result_path);
   }
-  if (worker_output_unwritable(wstatus) && output_failure_.empty())
-    output_failure_ = describe_task(r.index, r.task_id) + ": " + out->error;
+  if (worker_output_unwritable(wstatus)) {
+    // Not the task's failure: it goes back to the queue, for the run after the folder is fixed.
+    if (output_failure_.empty()) output_failure_ = describe_task(r.index, r.task_id) + ": " + out->error;
+    store_.release(r.task_id, token_, "could not write its files: " + out->error + "; will be retried");
+    progress_.line(describe_task(r.index, r.task_id) + " could not write its files, back in the queue: " + out->error,
+                   counts());
+    return;
+  }
   if (!store_.finish(r.task_id, token_, *out)) {
     // This run was judged gone (silent past the lease) and another took the task over.
     progress_.line(describe_task(r.index, r.task_id) + " " + out->status + " here, but another runner took it over "
