@@ -339,7 +339,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
 }
 
 void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
-  std::ofstream c(csv);
+  WholeTextFile c(csv);
   c.precision(6);
   c << "knob,setting,baseline,reference,replicas,failed,wall_s,particle_steps";
   for (const auto& m : s.metrics) c << "," << m << "_mean," << m << "_sd," << m << "_error";
@@ -354,7 +354,7 @@ void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
       std::replace(fails.begin(), fails.end(), '"', '\'');
       c << "," << p.score << "," << p.pass << "," << p.pareto << "," << p.recommended << ",\"" << fails << "\"\n";
     }
-  close_checked(c, csv.string());
+  c.commit();
 }
 
 }  // namespace
@@ -416,9 +416,9 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   for (const auto& kj : jobs)
     for (const auto& j : kj) {
       const fs::path f = dir / "jobs" / (j.name + ".json");
-      std::ofstream jf(f);
+      WholeTextFile jf(f);
       jf << j.spec.dump(2) << "\n";
-      close_checked(jf, f.string());
+      jf.commit();
       s.job_files.push_back(f.string());
       for (const auto& t : j.tasks) keys.insert(t.key);
     }
@@ -567,14 +567,14 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   s.files.push_back(csv.string());
   const fs::path rec = dir / (stem + "_recommendation.txt");
   {
-    std::ofstream r(rec);
+    WholeTextFile r(rec);
     for (const auto& k : s.knobs) r << k.recommendation << "\n";
     r << s.recommendation << "\n";
     if (!s.failures.empty()) {
       r << "failed tasks:\n";
       for (const auto& f : s.failures) r << "  " << f << "\n";
     }
-    close_checked(r, rec.string());
+    r.commit();
   }
   s.files.push_back(rec.string());
   return s;

@@ -51,13 +51,13 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
                  png = dir / "grazing_energy.png";
   ImageFile image(png.string());
   {
-    std::ofstream c(csv);
+    WholeTextFile c(csv);
     c.precision(10);
     c << "target,incidence_deg,dt_over_tc,energy_ratio,max_energy_ratio,rebound_deg,slid\n";
     for (const auto& r : s.rows)
       c << r.target << "," << r.incidence_deg << "," << r.dt_fraction << "," << r.energy_ratio << ","
         << r.max_energy_ratio << "," << r.rebound_deg << "," << (r.slid ? 1 : 0) << "\n";
-    close_checked(c, csv.string());
+    c.commit();
     std::ofstream d(data);
     d.precision(10);
     for (double f : fractions)

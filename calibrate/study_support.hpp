@@ -4,6 +4,7 @@
 // advice print them.
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
+#include "jobs/part_file.hpp"
 #include "jobs/query.hpp"
 #include "jobs/runner.hpp"
 #include "jobs/series_plot.hpp"
@@ -30,11 +31,20 @@ using jobs::gnuplot_png_terminal;
 using jobs::run_gnuplot_script;
 
 // A study's tables, advice and job files are its result: a write that fails (disk
-// full, a folder or a device in the way) is an error, not a "wrote" line.
-inline void close_checked(std::ofstream& f, const std::string& path) {
-  f.close();
-  if (!f) throw std::runtime_error("cannot write " + path + " (disk full, or not a writable file)");
-}
+// full, a folder or a device in the way) is an error, not a "wrote" line, and leaves
+// the earlier file whole (written beside it, renamed when complete).
+struct PartHolder {
+  jobs::PartFile part;
+};
+class WholeTextFile : private PartHolder, public std::ofstream {
+ public:
+  explicit WholeTextFile(const std::string& path) : PartHolder{jobs::PartFile(path)}, std::ofstream(part.part()) {}
+  void commit() {
+    close();
+    if (!*this) throw std::runtime_error("cannot write " + part.path() + " (disk full, or not a writable file)");
+    part.commit("file");
+  }
+};
 
 
 inline double metric(const jobs::ResultRow& r, const std::string& name) {

@@ -109,7 +109,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
 
   const fs::path csv = dir / "timestep.csv";
   {
-    std::ofstream c(csv);
+    WholeTextFile c(csv);
     c << "series,dt_factor,dt,status,failure,drift_per_simulated_s,max_relative_error,wall_s_per_simulated_s,pareto,error,"
          "replicas,drift_mean,drift_sd\n";
     for (const auto& p : s.points) {
@@ -120,7 +120,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
         << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
         << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
     }
-    close_checked(c, csv.string());
+    c.commit();
   }
   s.files.push_back(csv.string());
 
@@ -296,9 +296,9 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   s.recommendation = rec.str();
   write_timestep_charts(s, o.out_dir);
   {
-    std::ofstream r(fs::path(o.out_dir) / "timestep_recommendation.txt");
+    WholeTextFile r((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
     r << s.recommendation << "\n";
-    close_checked(r, (fs::path(o.out_dir) / "timestep_recommendation.txt").string());
+    r.commit();
     s.files.push_back((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
   }
   return s;

@@ -247,7 +247,8 @@ TEST(BadPaths, AStudyWhoseTableCannotBeWrittenSaysSoInsteadOfWrote) {
   fs::create_directories(d.path / "so" / "timestep.csv");  // a folder where the table goes
   const Result r = run_demcal({"study", "timestep", "--quick", "--db", "so.db", "--out", "so"}, d.path.string());
   EXPECT_EQ(r.rc, 1);
-  EXPECT_NE(r.err.find("cannot write so/timestep.csv"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("cannot move the file into place at so/timestep.csv"), std::string::npos) << r.err;
+  EXPECT_TRUE(fs::is_directory(d.path / "so" / "timestep.csv")) << "what was in the way is left alone";
   EXPECT_EQ(r.out.find("wrote"), std::string::npos) << r.out;
 }
 
