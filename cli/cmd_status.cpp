@@ -1,10 +1,12 @@
 #include "common.hpp"
 
 #include "db/store.hpp"
+#include "jobs/liveness.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/work_forecast.hpp"
 
 #include <iomanip>
+#include <map>
 #include <iostream>
 
 namespace demcal::cli {
@@ -93,6 +95,21 @@ void print_time_left(db::Store& store, const db::StatusCounts& counts) {
   }
 }
 
+// Tasks left 'running' by a runner that is gone (killed with -9, its host lost):
+// counted as running, they would be forecast as finishing any minute.
+void print_orphans(db::Store& store, const db::StatusCounts& counts) {
+  for (const auto& [name, by] : counts) {
+    const auto running = by.find("running");
+    if (running == by.end() || running->second == 0) continue;
+    std::map<std::string, int> gone;  // holder token -> tasks
+    for (const auto& t : store.tasks(name))
+      if (t.status == "running" && !jobs::holder_alive(store, t.worker)) ++gone[t.worker];
+    for (const auto& [token, n] : gone)
+      std::cout << name << ": " << n << " of the running task(s) are held by a runner that is gone (" << token
+                << "): no one is at work on them; any `demcal run` of the job puts them back in the queue\n";
+  }
+}
+
 }  // namespace
 
 void add_status(CLI::App& app, int& exit_code) {
@@ -127,6 +144,7 @@ void add_status(CLI::App& app, int& exit_code) {
         }
         std::cout << std::setw(9) << total << "\n";
       }
+      print_orphans(store, counts);
       print_time_left(store, counts);
       print_messages(store, counts, *db);
       print_missing(store, counts);

@@ -102,6 +102,10 @@ TEST(Runner, SigkillOfRunnerLosesNothingAndResumes) {
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
   EXPECT_LE(left_running, 1) << "one worker, at most one task running";
+  // status says no one is at work on a task the dead runner left 'running'.
+  const Result st = run_demcal({"status"}, d.path.string());
+  EXPECT_EQ(st.rc, 0) << st.err;
+  EXPECT_EQ(st.out.find("held by a runner that is gone") != std::string::npos, left_running == 1) << st.out;
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   std::map<std::int64_t, demcal::db::TaskRow> done_before;
   for (const auto& t : killed)
