@@ -506,10 +506,7 @@ void run_round(db::Store& store, const jobs::Job& sub, const std::string& out_di
                              "finished runs of both are kept, and --refine again goes on from the last round");
   // Not a round with holes: the runs did not happen, and a round stored on them
   // would read as converged (it moved nothing) and end the refinement.
-  if (!s.database_lost.empty()) throw std::runtime_error("refinement " + sub.name + ": " + s.database_lost);
-  if (!s.output_failure.empty())
-    throw std::runtime_error("refinement " + sub.name + " stopped: " + s.output_failure +
-                             "; free space in (or fix) " + out_dir + ", then --refine again: the round's runs are pending");
+  jobs::throw_if_stopped_short(s, "refinement " + sub.name);
   if (s.unfinished > 0)
     throw std::runtime_error("refinement " + sub.name + ": " + std::to_string(s.unfinished) + " of " +
                              std::to_string(s.total) + " run(s) unfinished (held by another runner?); --refine again "

@@ -433,6 +433,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     for (const auto& j : kj) {
       const RunSummary sum = run_job(store, j, ro);
       if (sum.interrupted) throw std::runtime_error("study interrupted: finished tasks are kept, run it again to resume");
+      jobs::throw_if_stopped_short(sum, "study " + j.name);
       if (sum.unfinished > 0) throw std::runtime_error("study: " + std::to_string(sum.unfinished) + " tasks of job " + j.name + " unfinished");
       s.ran += sum.ran;
     }

@@ -99,7 +99,4 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
   return s;
 }
 
-// ---------------------------------------------------------------------------
-// Fidelity studies (issue 9): one knob at a time around a baseline.
-
 }  // namespace demcal::calibrate

@@ -252,6 +252,7 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   ro.log = o.log;
   const RunSummary sum = run_job(store, job, ro);
   if (sum.interrupted) throw std::runtime_error("study interrupted: finished tasks are kept, run it again to resume");
+  jobs::throw_if_stopped_short(sum, "study " + job.name);
   if (sum.unfinished > 0) throw std::runtime_error("study: " + std::to_string(sum.unfinished) + " tasks unfinished");
   s.tasks = sum.total;
   s.reused = sum.reused;

@@ -77,7 +77,8 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
     << "#   (--dependency=afterok) and joins them with `demcal merge`.\n"
     << "# Steps by hand (no SLURM): SLURM_ARRAY_TASK_ID=i bash THIS_SCRIPT shard, then bash THIS_SCRIPT merge.\n"
     << "# A shard with a failed task exits 1 and holds the merge back; rerun it with\n"
-    << "#   sbatch --array=i THIS_SCRIPT shard --retry-failed   (or merge anyway: bash THIS_SCRIPT merge)\n"
+    << "#   sbatch --array=i THIS_SCRIPT shard --retry-failed   (or merge anyway: bash THIS_SCRIPT merge);\n"
+    << "# a shard stopped by a full disk left its tasks pending: sbatch --array=i THIS_SCRIPT shard\n"
     << "#SBATCH --job-name=demcal-" << job.name << "\n";
   if (!a.partition.empty()) s << "#SBATCH --partition=" << a.partition << "\n";
   if (!a.time.empty()) s << "#SBATCH --time=" << a.time << "\n";
@@ -128,7 +129,10 @@ void refuse_to_overwrite(const SlurmArgs& a) {
   std::error_code ec;
   // The database need not exist yet: the script at its path would be found by the
   // merge, after every shard ran, as "not a SQLite database".
-  if (fs::weakly_canonical(fs::absolute(a.out), ec) == fs::weakly_canonical(fs::absolute(a.db), ec))
+  std::error_code ec_out, ec_db;
+  const fs::path out_path = fs::weakly_canonical(fs::absolute(a.out), ec_out);
+  const fs::path db_path = fs::weakly_canonical(fs::absolute(a.db), ec_db);
+  if (!ec_out && !ec_db && out_path == db_path)
     throw jobs::JobError("--out", a.out + " is the database (--db) the shards merge into; the script needs a name of its own");
   if (!fs::exists(a.out, ec)) return;
   for (const auto& [other, what] : {std::pair{a.db, "the database (--db)"}, std::pair{a.job, "the job file"}})

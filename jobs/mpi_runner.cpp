@@ -158,7 +158,8 @@ int serve(const MpiOptions& options) {
       // mid-task (a lost node, MPI_Abort) leaves no folder of its own in /tmp, and
       // the rank in the name keeps a re-sent task's file apart from a lost rank's.
       t.result_path = (std::filesystem::path(t.h5_path).parent_path() /
-                       (".task-" + std::to_string(t.task_id) + ".rank" + std::to_string(rank) + ".result.json"))
+                       (".task-" + std::to_string(t.task_id) + "." + j.value("run_tag", std::string("")) + ".rank" +
+                        std::to_string(rank) + ".result.json"))
                           .string();
       test_kill_rank_hook(t.index);
       const std::string beat = std::to_string(t.task_id);
@@ -364,7 +365,8 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
                             {"threads", threads},
                             {"snapshots", job.snapshots},
                             {"task_key", row.key},
-                            {"h5_path", (dir / task_file_name(row.id, row.key)).string()}};
+                            {"h5_path", (dir / task_file_name(row.id, row.key)).string()},
+                        {"run_tag", file_name_safe(token)}};
         send(r, kTagTask, t.dump());
         k.task = std::move(row);
         k.task_start = k.last_seen = Clock::now();

@@ -8,9 +8,9 @@
 
 namespace demcal::jobs {
 
-// A task's file could not be written or moved into place (a full disk, a folder
-// made read-only or removed): every later task of the run would fail the same way,
-// after running, so the runner stops on it.
+// A file could not be written or moved into place (a full disk, a folder made
+// read-only or removed). For a task's HDF5 file, when the folder takes no file
+// either, every later task would fail the same way after running: the runner stops.
 class OutputWriteError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
@@ -30,7 +30,7 @@ class PartFile {
 
   const std::string& path() const { return path_; }
   const std::string& part() const { return part_; }
-  // Renames the part over the path. Throws std::runtime_error ("cannot move the
+  // Renames the part over the path. Throws OutputWriteError ("cannot move the
   // `what` into place at PATH: why") when that fails; the part is then removed with
   // the PartFile, as an uncommitted one.
   void commit(const std::string& what);

@@ -38,13 +38,6 @@ int usable_cores() {
   return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
-// A runner token ("host/pidns...:pid:start") as part of a file name.
-std::string file_name_safe(std::string s) {
-  for (char& c : s)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '-';
-  return s;
-}
-
 struct Running {
   std::int64_t task_id;
   std::size_t index;
@@ -482,6 +475,19 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
           << kept << ". Give the job another name to keep both\n";
   }
   return id;
+}
+
+std::string file_name_safe(std::string s) {
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '-';
+  return s;
+}
+
+void throw_if_stopped_short(const RunSummary& s, const std::string& context) {
+  if (!s.database_lost.empty()) throw std::runtime_error(context + ": " + s.database_lost);
+  if (!s.output_failure.empty())
+    throw std::runtime_error(context + " stopped: " + s.output_failure +
+                             "; free space in (or fix) the output folder and run it again: those tasks are pending");
 }
 
 std::string database_lost(const db::Store& store) {

@@ -48,6 +48,13 @@ RunSummary run_job(db::Store& store, const Job& job, const RunOptions& options);
 // index) and returns its id. When the job's spec changed since the last run into
 // this database, says on `log` which tasks of the earlier spec it no longer holds.
 std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, std::ostream& log);
+// A runner token ("host/pidns...:pid:start") as part of a file name: the runs'
+// result files in a shared output folder are told apart by it.
+std::string file_name_safe(std::string s);
+// A run that stopped short for a reason a caller must not read as "some tasks
+// failed": the database file lost, or the output folder unwritable. Throws
+// std::runtime_error starting with `context`; returns otherwise.
+void throw_if_stopped_short(const RunSummary& s, const std::string& context);
 // Empty while the database file `store` opened is still at its path; else a sentence
 // saying it was deleted or replaced during the run.
 std::string database_lost(const db::Store& store);

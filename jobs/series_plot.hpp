@@ -35,7 +35,8 @@ class ImageFile {
  public:
   explicit ImageFile(const std::string& out);
   const std::string& part() const { return file_.part(); }
-  // Throws std::runtime_error when gnuplot left nothing at part().
+  // Throws std::runtime_error when gnuplot left nothing at part() or an image cut
+  // short (gnuplot exits 0 on a full disk); the earlier file at the path is kept.
   void commit();
 
  private:

@@ -18,8 +18,9 @@ std::string xdmf_path_for(const std::string& h5_path);
 // The XML text; h5_name is the HDF5 file's name relative to the .xmf file.
 std::string snapshot_xdmf(const std::string& h5_name, const std::vector<Snapshot>& snapshots);
 
-// Written to `path`.part and renamed into place; throws std::runtime_error naming
-// the path and the reason when it cannot be written.
+// Written to a part of this process's own and renamed into place; throws
+// OutputWriteError naming the path and the reason when it cannot be written (the
+// worker turns that into a warning: the .xmf is a viewing aid).
 void write_snapshot_xdmf(const std::string& path, const std::string& h5_name, const std::vector<Snapshot>& snapshots);
 
 }  // namespace demcal::jobs
