@@ -1,6 +1,9 @@
 #include "work_forecast.hpp"
 
+#include "liveness.hpp"
+
 #include <algorithm>
+#include <map>
 #include <cmath>
 #include <iomanip>
 #include <queue>
@@ -187,8 +190,16 @@ TimeLeft time_left(db::Store& store, const std::string& job, double now_unix_s) 
   }
   std::vector<double> pending;
   std::vector<std::pair<double, double>> running;
+  std::map<std::string, bool> alive;  // per holder token: judged once
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const double c = t.forecast.task_core_seconds[k];
+    // A task whose runner is gone (killed with -9, its host silent) is not being
+    // worked on: it is counted whole, as the pending task the next run makes it.
+    if (rows[k].status == "running") {
+      const auto [it, first] = alive.try_emplace(rows[k].worker, false);
+      if (first) it->second = holder_alive(store, rows[k].worker);
+      if (!it->second) rows[k].status = "pending";
+    }
     // A running task has used its wall time so far, at the CPU-to-wall ratio of the
     // done tasks (a busy machine gives a task less than its wall time); one thread's
     // worth, a guess for a task that runs several (the database does not say how many).

@@ -106,6 +106,7 @@ TEST(Runner, SigkillOfRunnerLosesNothingAndResumes) {
   const Result st = run_demcal({"status"}, d.path.string());
   EXPECT_EQ(st.rc, 0) << st.err;
   EXPECT_EQ(st.out.find("held by a runner that is gone") != std::string::npos, left_running == 1) << st.out;
+  EXPECT_EQ(st.out.find("running now"), std::string::npos) << "no one runs the orphan: " << st.out;
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   std::map<std::int64_t, demcal::db::TaskRow> done_before;
   for (const auto& t : killed)

@@ -3,11 +3,13 @@
 #include "../temp_dir.hpp"
 #include "db/merge.hpp"
 #include "db/store.hpp"
+#include "jobs/liveness.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/progress.hpp"
 #include "jobs/work_forecast.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <set>
@@ -146,7 +148,8 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   out.wall_s = 1;
   out.metrics = {{"cpu_s", 3.0 * yardstick(scene, job.tasks[0].params)}};
   ASSERT_TRUE(store.finish(rows[0].id, "w", out));
-  ASSERT_TRUE(store.claim(rows[1].id, "w"));
+  const std::string me = jobs::runner_token();  // a runner at work (a dead one's task is counted whole)
+  ASSERT_TRUE(store.claim(rows[1].id, me));
   const double started = store.task(rows[1].id)->started_at;
   t = jobs::time_left(store, job.name, started + 1.0);
   ASSERT_TRUE(t.known);
@@ -172,9 +175,18 @@ TEST(WorkForecast, TimeLeftCountsPendingTasksAndWhatRunningOnesHaveNotUsed) {
   EXPECT_EQ(t.core_seconds, 0.0);
   EXPECT_EQ(jobs::describe(t).rfind("1 task(s) to go: the running one has taken longer than forecast; at", 0), 0u)
       << jobs::describe(t);
+  // Its runner gone (a token of a process that is not there): not running, all of it still to do.
+  const std::string host = me.substr(0, me.find(':'));
+  store.release(rows[1].id, me, "");
+  const std::string dead = host + ":" + std::to_string(getpid()) + ":1";
+  ASSERT_TRUE(store.claim(rows[1].id, dead));
+  t = jobs::time_left(store, job.name, started + 1e6);
+  EXPECT_EQ(t.running, 0);
+  EXPECT_EQ(t.pending, 1);
+  EXPECT_GT(t.core_seconds, 0.0);
 
   // Everything done: nothing to say.
-  ASSERT_TRUE(store.finish(rows[1].id, "w", out));
+  ASSERT_TRUE(store.finish(rows[1].id, dead, out));
   EXPECT_FALSE(jobs::time_left(store, job.name, db::unix_now()).known);
 }
 
