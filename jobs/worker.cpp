@@ -131,15 +131,13 @@ int run_worker(const WorkerTask& t) {
   bool output_written = true;
   try {
     out = run_scene(t);
-  } catch (const OutputWriteError& e) {
+  } catch (const std::exception& e) {
     out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
            {"artifacts", nlohmann::json::array()}};
     // The folder's fault only if it takes no file now: a cause of this task's own (a
     // folder in the way of its name) fails the task alone.
-    output_written = folder_takes_a_file(std::filesystem::path(t.h5_path).parent_path());
-  } catch (const std::exception& e) {
-    out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
-           {"artifacts", nlohmann::json::array()}};
+    if (dynamic_cast<const OutputWriteError*>(&e))
+      output_written = folder_takes_a_file(std::filesystem::path(t.h5_path).parent_path());
   }
   out["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string tmp = t.result_path + ".tmp";
