@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace demcal::jobs {
@@ -35,23 +34,8 @@ std::string terminal_line(const std::string& ext) {
          "else { set terminal png size 900,600 }\n";
 }
 
-// Runs gnuplot on a script file without a shell, so no path is ever interpreted.
-void run_gnuplot(const std::string& script) {
-  const pid_t pid = fork();
-  if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
-  if (pid == 0) {
-    execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  int st = 0;
-  waitpid(pid, &st, 0);
-  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
-  if (WEXITSTATUS(st) != 0) throw std::runtime_error("gnuplot failed (exit status " + std::to_string(WEXITSTATUS(st)) + ")");
-}
-
 }  // namespace
 
-void run_gnuplot_script(const std::string& script_path) { run_gnuplot(script_path); }
 std::string gnuplot_quoted(const std::string& text) { return quoted(text); }
 std::string gnuplot_png_terminal(int width, int height) {
   const std::string size = std::to_string(width) + "," + std::to_string(height);
@@ -166,7 +150,7 @@ void plot_series(const PlotRequest& r) {
         << (unit(yi[i]) == u1 ? " axes x1y1" : " axes x1y2") << " with lines title " << quoted(label(r.y[i], yi[i]));
     g << "\n";
   }
-  run_gnuplot(script);
+  run_gnuplot_script(script);
   image.commit();
 }
 

@@ -1,5 +1,6 @@
 #pragma once
 // Draws columns of a task's stored time series with gnuplot, to PNG or SVG.
+#include "gnuplot_process.hpp"  // run_gnuplot_script
 #include "part_file.hpp"
 
 #include <string>
@@ -20,9 +21,7 @@ struct PlotRequest {
 // std::runtime_error when gnuplot cannot be run or fails.
 void plot_series(const PlotRequest& request);
 
-// Runs gnuplot on a script file (no shell). Throws std::runtime_error when gnuplot
-// is missing or fails. `quoted` writes a gnuplot single-quoted string.
-void run_gnuplot_script(const std::string& script_path);
+// A gnuplot single-quoted string.
 std::string gnuplot_quoted(const std::string& text);
 // The PNG terminal line series plots use (pngcairo when available), at width x height.
 std::string gnuplot_png_terminal(int width, int height);

@@ -6,6 +6,7 @@
 namespace demcal::jobs {
 namespace {
 volatile std::sig_atomic_t g_stop = 0;
+int g_depth = 0;  // guards nest (a study charts after its run); only the outermost installs
 extern "C" void on_stop_signal(int sig) { g_stop = sig; }
 }  // namespace
 
@@ -13,7 +14,9 @@ struct StopSignalGuard::Saved {
   struct sigaction old_int {}, old_term {};
 };
 
-StopSignalGuard::StopSignalGuard() : saved_(new Saved) {
+StopSignalGuard::StopSignalGuard() : saved_(nullptr) {
+  if (g_depth++ > 0) return;  // an inner guard keeps the outer one's handlers and any request
+  saved_ = new Saved;
   g_stop = 0;
   struct sigaction sa {};
   sa.sa_handler = on_stop_signal;
@@ -23,6 +26,8 @@ StopSignalGuard::StopSignalGuard() : saved_(new Saved) {
 }
 
 StopSignalGuard::~StopSignalGuard() {
+  --g_depth;
+  if (!saved_) return;
   sigaction(SIGINT, &saved_->old_int, nullptr);
   sigaction(SIGTERM, &saved_->old_term, nullptr);
   delete saved_;

@@ -4,7 +4,8 @@
 
 namespace demcal::jobs {
 
-// Installs the handlers for its lifetime (and clears any earlier request).
+// Installs the handlers for its lifetime (and clears any earlier request). A guard
+// made while another is alive changes nothing: the outer one's request stands.
 class StopSignalGuard {
  public:
   StopSignalGuard();

@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <set>
 #include <sstream>
 
@@ -405,6 +406,82 @@ TEST(CalibrateCli, AFailedGnuplotLeavesTheEarlierMapWhole) {
   EXPECT_EQ(slurp(d.file("m.png")), good);
   for (const auto& e : fs::directory_iterator(d.path))
     EXPECT_EQ(e.path().filename().string().find(".part"), std::string::npos) << e.path();
+}
+
+// A stand-in gnuplot that, for the image, starts a child of its own, records both
+// pids and waits for ever; scripts that draw nothing go to the real gnuplot.
+std::string hanging_gnuplot(const TempDir& d) {
+  fs::create_directories(d.path / "bin");
+  const std::string fake = (d.path / "bin" / "gnuplot").string();
+  write(fake, "#!/bin/sh\n"
+              "out=$(sed -n \"s/^set output '\\(.*\\)'$/\\1/p\" \"$1\")\n"
+              "if [ -z \"$out\" ]; then PATH=" + std::string(std::getenv("PATH")) + " exec gnuplot \"$@\"; fi\n"
+              "printf 'PNG' > \"$out\"\n"
+              "sleep 1000 &\necho $! > " + d.file("child.pid") + "\n"
+              "echo $$ > " + d.file("gnuplot.pid.part") + "\nmv " + d.file("gnuplot.pid.part") + " " +
+              d.file("gnuplot.pid") + "\nwait\n");
+  fs::permissions(fake, fs::perms::owner_all);
+  fs::create_directories(d.path / "tmp");
+  return (d.path / "bin").string() + ":" + std::getenv("PATH");
+}
+
+bool process_gone(const std::string& pid_file) {
+  const int pid = std::stoi(slurp(pid_file));
+  for (int i = 0; i < 200 && kill(pid, 0) == 0; ++i) usleep(10000);  // an orphan is reaped by init
+  return kill(pid, 0) != 0;
+}
+
+// What a stopped gnuplot must leave: the earlier map, no part file, no scratch
+// folder, and neither gnuplot nor the child it started still running.
+void expect_nothing_left(const TempDir& d, const std::string& good) {
+  EXPECT_EQ(slurp(d.file("m.png")), good);
+  for (const auto& e : fs::directory_iterator(d.path))
+    EXPECT_EQ(e.path().filename().string().find(".png.part"), std::string::npos) << e.path();
+  EXPECT_TRUE(fs::is_empty(d.path / "tmp"));
+  EXPECT_TRUE(process_gone(d.file("gnuplot.pid")));
+  EXPECT_TRUE(process_gone(d.file("child.pid")));
+}
+
+TEST(CalibrateCli, AGnuplotThatHangsIsStoppedAtItsTimeLimit) {
+  TempDir d;
+  const std::string dir = d.path.string();
+  make_db(d, false);
+  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string good = slurp(d.file("m.png"));
+  const std::string path = hanging_gnuplot(d);
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
+                 {{"PATH", path}, {"TMPDIR", (d.path / "tmp").string()}, {"DEMCAL_GNUPLOT_TIMEOUT_S", "1"}});
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("gnuplot did not finish within 1 s"), std::string::npos) << r.err;
+  expect_nothing_left(d, good);
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir, {{"DEMCAL_GNUPLOT_TIMEOUT_S", "soon"}});
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("DEMCAL_GNUPLOT_TIMEOUT_S='soon'"), std::string::npos) << r.err;
+}
+
+TEST(CalibrateCli, SigtermWhileGnuplotDrawsStopsItAndLeavesNothingBehind) {
+  for (const int sig : {SIGTERM, SIGINT}) {
+    TempDir d;
+    const std::string dir = d.path.string();
+    make_db(d, false);
+    auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
+    ASSERT_EQ(r.rc, 0) << r.err;
+    const std::string good = slurp(d.file("m.png"));
+    const std::string path = hanging_gnuplot(d);
+    const pid_t pid = spawn({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
+                            {{"PATH", path}, {"TMPDIR", (d.path / "tmp").string()}});
+    for (int i = 0; i < 3000 && !fs::exists(d.file("gnuplot.pid")); ++i) usleep(10000);
+    ASSERT_TRUE(fs::exists(d.file("gnuplot.pid")));
+    kill(pid, sig);
+    r = finish(pid, dir);
+    EXPECT_EQ(r.rc, 1) << r.err;
+    EXPECT_NE(r.err.find(sig == SIGTERM ? "terminated (SIGTERM) while gnuplot was drawing"
+                                        : "interrupted (SIGINT) while gnuplot was drawing"),
+              std::string::npos)
+        << r.err;
+    expect_nothing_left(d, good);
+  }
 }
 
 TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {

@@ -1,0 +1,105 @@
+#include "gnuplot_process.hpp"
+
+#include "stop_signal.hpp"
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdlib>
+#include <fcntl.h>
+#include <sstream>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+
+namespace demcal::jobs {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+pid_t start_gnuplot(const std::string& script) {
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
+  if (pid == 0) {
+    // Its own group, so that stopping it reaches whatever it starts, and a terminal's
+    // Ctrl-C reaches demcal, which decides.
+    setpgid(0, 0);
+    signal(SIGINT, SIG_DFL);
+    signal(SIGTERM, SIG_DFL);
+    const int null = open("/dev/null", O_RDONLY);
+    if (null >= 0) dup2(null, STDIN_FILENO);  // a script that pauses for input fails instead of waiting
+    execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  setpgid(pid, pid);  // also here: no window in which a signal to the group misses it
+  return pid;
+}
+
+// Stops the group and reaps the child, so no gnuplot outlives the call.
+void stop_gnuplot(pid_t pid, int sig) {
+  kill(-pid, sig);
+  int st = 0;
+  for (int i = 0; i < 100; ++i) {  // up to 2 s to exit on SIGTERM, then SIGKILL
+    if (waitpid(pid, &st, WNOHANG) == pid) return;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  kill(-pid, SIGKILL);
+  while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {
+  }
+}
+
+std::string seconds(double s) {
+  std::ostringstream o;
+  o << s;
+  return o.str();
+}
+
+}  // namespace
+
+GnuplotInterrupted::GnuplotInterrupted(int signal)
+    : std::runtime_error(std::string(signal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)") +
+                         " while gnuplot was drawing: gnuplot stopped, nothing written"),
+      signal_(signal) {}
+
+double gnuplot_time_limit_s() {
+  const char* env = std::getenv("DEMCAL_GNUPLOT_TIMEOUT_S");
+  if (!env || !*env) return 300.0;
+  char* end = nullptr;
+  const double v = std::strtod(env, &end);
+  if (*end != '\0' || !std::isfinite(v) || v <= 0)
+    throw std::runtime_error(std::string("DEMCAL_GNUPLOT_TIMEOUT_S='") + env +
+                             "': must be a positive number of seconds");
+  return v;
+}
+
+void run_gnuplot_script(const std::string& script) {
+  const double limit_s = gnuplot_time_limit_s();
+  StopSignalGuard guard;  // nests inside a runner's or a study's
+  if (stop_signal()) throw GnuplotInterrupted(stop_signal());
+  const pid_t pid = start_gnuplot(script);
+  const auto start = Clock::now();
+  int st = 0;
+  for (;;) {
+    const pid_t r = waitpid(pid, &st, WNOHANG);
+    if (r == pid) break;
+    if (r < 0 && errno != EINTR) throw std::runtime_error("cannot wait for gnuplot");
+    if (stop_signal()) {
+      stop_gnuplot(pid, SIGTERM);
+      throw GnuplotInterrupted(stop_signal());
+    }
+    if (std::chrono::duration<double>(Clock::now() - start).count() > limit_s) {
+      stop_gnuplot(pid, SIGKILL);
+      throw std::runtime_error("gnuplot did not finish within " + seconds(limit_s) +
+                               " s and was stopped (DEMCAL_GNUPLOT_TIMEOUT_S sets the limit)");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  if (stop_signal()) throw GnuplotInterrupted(stop_signal());  // gnuplot took the terminal's Ctrl-C too
+  if (WIFSIGNALED(st))
+    throw std::runtime_error("gnuplot was killed by signal " + std::to_string(WTERMSIG(st)) + " while drawing");
+  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
+  if (WEXITSTATUS(st) != 0) throw std::runtime_error("gnuplot failed (exit status " + std::to_string(WEXITSTATUS(st)) + ")");
+}
+
+}  // namespace demcal::jobs
