@@ -1,6 +1,7 @@
 #include "common.hpp"
 
 #include "db/merge.hpp"
+#include "jobs/stop_signal.hpp"
 
 #include <iostream>
 #include <memory>
@@ -14,7 +15,9 @@ struct MergeArgs {
 };
 
 int merge(const MergeArgs& a) {
-  const db::MergeReport r = db::merge_databases(a.into, a.parts);
+  // Ctrl-C or SIGTERM ends the merge through its rollback, so nothing is half-written.
+  jobs::StopSignalGuard guard;
+  const db::MergeReport r = db::merge_databases(a.into, a.parts, [] { return jobs::stop_signal() != 0; });
   std::cout << "merged " << r.parts << " database(s) into " << a.into << ": " << r.jobs_added << " job(s) added, "
             << r.tasks_added << " task(s) added, " << r.results_taken << " result(s) taken, " << r.identical
             << " identical already there, " << r.kept << " kept (the destination's finished result), "
@@ -42,7 +45,8 @@ void add_merge(CLI::App& app, int& exit_code) {
       "Identical results already in the destination are left alone, so merging a part twice changes nothing. "
       "The same task key with different metrics is a conflict: reported, the destination keeps its result, exit "
       "code 1. A part that is missing, not a demcal database or of another schema version stops the merge before "
-      "anything is written (exit code 2); the merge is one transaction.");
+      "anything is written (exit code 2); the merge is one transaction, and a new destination is built beside it "
+      "and renamed when whole, so a merge stopped or killed part-way leaves no half-made database.");
   cmd->callback([a, &exit_code] { exit_code = guarded("", [&] { return merge(*a); }); });
 }
 

@@ -3,10 +3,13 @@
 #include "schema.hpp"
 #include "sqlite.hpp"
 
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fcntl.h>
+#include <functional>
 #include <unistd.h>
 #include <map>
 #include <optional>
@@ -152,11 +155,13 @@ bool finished(const std::string& status) { return status == "done" || status == 
 
 class Merger {
  public:
-  Merger(Connection& out, const std::string& into, MergeReport& report) : out_(out), into_(into), r_(report) {}
+  Merger(Connection& out, const std::string& into, MergeReport& report, const std::function<bool()>& stop)
+      : out_(out), into_(into), r_(report), stop_(stop) {}
 
   void merge(const std::string& path) {
     Connection part(path, /*read_only=*/true);
     path_ = path;
+    check_stop();
     merge_jobs(part);
     merge_tasks(part);
     merge_links(part);
@@ -196,6 +201,7 @@ class Merger {
         " error FROM tasks ORDER BY id");
     Statement find = out_.prepare("SELECT id, status FROM tasks WHERE key = ?");
     while (s.step()) {
+      check_stop();
       const std::int64_t part_id = s.int64(0);
       const std::string key = s.text(4);
       TaskResult res;
@@ -312,26 +318,37 @@ class Merger {
     }
   }
 
+  void check_stop() {
+    if (stop_ && stop_()) throw DbError("stopped while merging " + path_ + " into " + into_ + "; nothing merged");
+  }
+
   Connection& out_;
   std::string into_, path_;
   MergeReport& r_;
+  const std::function<bool()>& stop_;
   std::map<std::int64_t, std::pair<std::int64_t, std::string>> jobs_;  // part job id -> destination id, name
   std::map<std::int64_t, std::int64_t> tasks_;                          // part task id -> destination id
 };
 
 }  // namespace
 
-static MergeReport merge_into(const std::string& into, const std::vector<std::string>& parts) {
-  Connection out(into, /*read_only=*/false);
+// `file` is where the rows go; `into` is the name the user gave (messages only).
+static MergeReport merge_into(const std::string& file, const std::string& into, const std::vector<std::string>& parts,
+                              const std::function<bool()>& stop) {
+  Connection out(file, /*read_only=*/false);
   out.exec("PRAGMA journal_mode = WAL");
   out.exec("PRAGMA synchronous = NORMAL");
   out.exec("PRAGMA foreign_keys = ON");
   migrate(out);
   MergeReport report;
   Transaction t(out);
-  Merger m(out, into, report);
+  Merger m(out, into, report, stop);
   for (const auto& p : parts) m.merge(p);
   t.commit();
+  // A database built under another name is renamed when whole: its WAL is folded
+  // into the file first (and removed), so the rename moves every row. Runs set WAL
+  // again when they open it.
+  if (file != into) out.exec("PRAGMA journal_mode = DELETE");
   return report;
 }
 
@@ -340,27 +357,59 @@ bool is_timing_metric(const std::string& name) {
          name == "threads";
 }
 
-MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts) {
+namespace {
+
+void remove_database_files(const std::string& file) {
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+    std::error_code ec;
+    fs::remove(file + suffix, ec);
+  }
+}
+
+// Renames `from` to `to` unless `to` exists (a file another process made meanwhile
+// is not ours to replace). Filesystems without RENAME_NOREPLACE get link + unlink.
+void publish(const std::string& from, const std::string& to) {
+  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return;
+  int err = errno;
+  if (err == EINVAL || err == ENOSYS || err == ENOTSUP) {
+    if (::link(from.c_str(), to.c_str()) == 0) {
+      ::unlink(from.c_str());
+      return;
+    }
+    err = errno;
+  }
+  throw DbError("cannot name the merged database " + to + ": " + std::strerror(err) +
+                (err == EEXIST ? " (another process made that file while this merge ran; merge again)" : ""));
+}
+
+}  // namespace
+
+MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts,
+                            const std::function<bool()>& stop) {
   // Every part first: a bad one stops the merge before the destination is touched.
   for (const auto& p : parts) check_part(p, into);
   check_file(into);
-  // A merge that fails (two parts ran different job files under one name) rolls
-  // back; a destination it created is removed too, so nothing is left half-made.
-  // Created exclusively (O_EXCL): a file another process made meanwhile, or the
-  // target of a dangling link, is not ours to remove.
-  bool created = false;
-  if (const int fd = ::open(into.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644); fd >= 0) {
-    ::close(fd);
-    created = true;
+  struct stat st {};
+  if (::lstat(into.c_str(), &st) == 0 || errno != ENOENT) {
+    // An existing destination: one transaction, so a merge that fails (two parts ran
+    // different job files under one name) or is stopped leaves it as it was.
+    return merge_into(into, into, parts, stop);
   }
+  // A new destination is built under another name and named when whole: a merge
+  // killed part-way leaves no empty database where the merged one should be, only
+  // a part file that says what it is. Created exclusively: a file of that name is
+  // not ours to remove.
+  const std::string part = into + ".merging-" + std::to_string(::getpid()) + ".part";
+  const int fd = ::open(part.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
+  if (fd < 0) throw DbError("cannot create " + part + " for the merged database: " + std::strerror(errno));
+  ::close(fd);
   try {
-    return merge_into(into, parts);
+    MergeReport report = merge_into(part, into, parts, stop);  // closed here: the WAL is folded in
+    publish(part, into);
+    remove_database_files(part);  // -wal/-shm, should SQLite have left them
+    return report;
   } catch (...) {
-    if (created)
-      for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
-        std::error_code ec;
-        std::filesystem::remove(into + suffix, ec);
-      }
+    remove_database_files(part);
     throw;
   }
 }

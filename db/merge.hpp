@@ -18,6 +18,9 @@
 // Fits are copied unless an identical row is there. Every part is checked before
 // anything is written (it must exist and be a demcal database of this schema
 // version), and the whole merge is one transaction: on any error nothing is written.
+// A destination that does not exist yet is built beside it (`<into>.merging-<pid>.part`)
+// and renamed when whole, so a merge killed part-way leaves no empty database.
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -39,7 +42,10 @@ struct MergeReport {
 bool is_timing_metric(const std::string& name);
 
 // Throws DbError(bad_input) naming the file and the reason for a part that cannot
-// be merged, DbError (runtime) for a job-spec conflict or an I/O failure.
-MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts);
+// be merged, DbError (runtime) for a job-spec conflict or an I/O failure. `stop`,
+// asked once per task row, ends the merge with nothing written when it says so
+// (the command line asks whether SIGINT/SIGTERM arrived).
+MergeReport merge_databases(const std::string& into, const std::vector<std::string>& parts,
+                            const std::function<bool()>& stop = {});
 
 }  // namespace demcal::db

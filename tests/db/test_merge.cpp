@@ -7,8 +7,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
+#include <sys/wait.h>
 #include <unistd.h>
 
 using demcal::test::TempDir;
@@ -93,4 +96,70 @@ TEST(Merge, RunningTaskOfAPartArrivesAsPendingAndMergingTwiceChangesNothing) {
   EXPECT_EQ(again.results_taken, 0);
   EXPECT_EQ(again.identical, 2) << "a: done in both, the same; c: failed in both";
   EXPECT_TRUE(again.conflicts.empty());
+}
+
+namespace {
+std::vector<std::string> names_in(const std::string& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) out.push_back(e.path().filename().string());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+}  // namespace
+
+TEST(Merge, AStoppedMergeLeavesNoDestinationItMadeAndAnExistingOneAsItWas) {
+  TempDir d;
+  write_db(d.file("part.db"), {{"done", 1.0}, {"failed"}, {"done", 3.0}});
+  // Stopped after the first task row: a new destination is not left behind, half-made or empty.
+  int asked = 0;
+  const auto stop_at_second_row = [&] { return ++asked > 2; };
+  EXPECT_THROW(demcal::db::merge_databases(d.file("new.db"), {d.file("part.db")}, stop_at_second_row),
+               demcal::db::DbError);
+  EXPECT_GT(asked, 2);
+  EXPECT_EQ(names_in(d.path.string()), std::vector<std::string>{"part.db"});
+  // An existing destination keeps what it had.
+  write_db(d.file("dest.db"), {{"pending"}, {"pending"}, {"pending"}});
+  asked = 0;
+  EXPECT_THROW(demcal::db::merge_databases(d.file("dest.db"), {d.file("part.db")}, stop_at_second_row),
+               demcal::db::DbError);
+  Store s(d.file("dest.db"), /*read_only=*/true);
+  EXPECT_EQ(status_of(s, "a"), "pending");
+}
+
+TEST(Merge, AMergeKilledPartWayLeavesNoDatabaseUnderTheDestinationsName) {
+  TempDir d;
+  write_db(d.file("part.db"), {{"done", 1.0}, {"failed"}, {"done", 3.0}});
+  const std::string into = d.file("merged.db");
+  const pid_t pid = fork();
+  if (pid == 0) {  // killed (SIGKILL: nothing runs after it) at the second task row
+    int asked = 0;
+    demcal::db::merge_databases(into, {d.file("part.db")}, [&] {
+      if (++asked == 3) raise(SIGKILL);
+      return false;
+    });
+    _exit(0);
+  }
+  int st = 0;
+  waitpid(pid, &st, 0);
+  ASSERT_TRUE(WIFSIGNALED(st));
+  EXPECT_FALSE(std::filesystem::exists(into)) << "an empty database would pass for the merged one";
+  // What it leaves is named for what it is, and a rerun makes the destination whole.
+  bool part_left = false;
+  for (const auto& n : names_in(d.path.string())) part_left |= n.rfind("merged.db.merging-", 0) == 0;
+  EXPECT_TRUE(part_left);
+  const MergeReport r = demcal::db::merge_databases(into, {d.file("part.db")});
+  EXPECT_EQ(r.tasks_added, 3);
+  Store s(into, /*read_only=*/true);
+  EXPECT_EQ(status_of(s, "a"), "done");
+  EXPECT_EQ(x_of(s, "c"), 3.0);
+}
+
+TEST(Merge, ANewDestinationIsOneWholeFileWithNoJournalBeside) {
+  TempDir d;
+  write_db(d.file("part.db"), {{"done", 1.0}, {"failed"}, {"done", 3.0}});
+  demcal::db::merge_databases(d.file("new.db"), {d.file("part.db")});
+  // The rows are in the file itself, not in a -wal a rename would leave behind.
+  EXPECT_EQ(names_in(d.path.string()), (std::vector<std::string>{"new.db", "part.db"}));
+  Store s(d.file("new.db"), /*read_only=*/true);
+  EXPECT_EQ(x_of(s, "a"), 1.0);
 }
