@@ -251,6 +251,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     k.ready = false;
   };
 
+  auto last_file_check = t0;
   for (;;) {
     if (stop_signal()) break;
     bool got = false;
@@ -321,6 +322,13 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     // was busy is read first.
     const auto now = Clock::now();
     heartbeat.tick();  // rank 0's own, for runs on other hosts
+    if (now - last_file_check > std::chrono::seconds(2)) {
+      // A deleted database takes every result stored from now on with it: stop
+      // handing out work at once, not when the queue runs dry.
+      last_file_check = now;
+      s.database_lost = database_lost(store);
+      if (!s.database_lost.empty()) break;
+    }
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (k.lost || k.stopped) continue;
@@ -417,8 +425,9 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     }
   }
   g_dismissed = true;
-  s.database_lost = database_lost(store);
-  if (!queue.empty() && !s.interrupted && s.output_failure.empty())
+  if (s.database_lost.empty()) s.database_lost = database_lost(store);  // a run shorter than 2 s, or its end
+  else log << "\n" << s.database_lost << ": no more tasks handed out; the ranks stop after their current task\n";
+  if (!queue.empty() && !s.interrupted && s.output_failure.empty() && s.database_lost.empty())
     log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
   progress.finish();
   const Counts c = counts();

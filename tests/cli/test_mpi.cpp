@@ -124,6 +124,35 @@ TEST(Mpi, KilledWorkerRankWithoutRecoveryEndsTheJobAndTheNextRunResumes) {
   EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "abort"), "done"), 6);
 }
 
+// A deleted database takes every later result with it: rank 0 must stop handing
+// out tasks within seconds, not run the whole queue into an unlinked file.
+TEST(Mpi, ADatabaseDeletedMidRunStopsTheHandOut) {
+  TempDir d;
+  const std::vector<double> factors = {0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.11, 0.12};
+  write(d.file("j.json"), collision_job("gone", factors, 150, 600000));
+  std::vector<std::string> argv = {DEMCAL_MPIEXEC, "-np", "3", "--oversubscribe", DEMCAL_BIN, "run", "j.json", "--mpi"};
+  const pid_t pid = spawn_program(argv, d.path.string(), kMpiEnv);
+  const std::string db = d.file("demcal.db");
+  bool running = false;
+  for (int i = 0; i < 3000 && !running; ++i) {
+    usleep(20000);
+    try {
+      running = fs::exists(db) && count_status(tasks_of(db, "gone"), "running") >= 1;
+    } catch (const std::exception&) {
+      // the file is there, its tables not yet
+    }
+  }
+  ASSERT_TRUE(running) << "no task was seen running within 60 s";
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
+  const Result r = finish(pid, d.path.string());
+  EXPECT_NE(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("was deleted while this run was writing it"), std::string::npos) << r.err;
+  int started = 0;
+  for (std::size_t at = r.err.find("started on rank"); at != std::string::npos; at = r.err.find("started on rank", at + 1))
+    ++started;
+  EXPECT_LE(started, 4) << "tasks went on being handed out after the database was gone:\n" << r.err;
+}
+
 TEST(Mpi, BadInputUnderMpirunEndsEveryRank) {
   TempDir d;
   write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "material": {"theta_deg": 90}})");
