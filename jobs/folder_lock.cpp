@@ -1,5 +1,7 @@
 #include "folder_lock.hpp"
 
+#include "liveness.hpp"
+
 #include "job_error.hpp"
 
 #include <cerrno>
@@ -35,9 +37,7 @@ FolderLock::FolderLock(const std::string& dir, const std::string& flag) {
   }
   // Who holds it, for the message above: written before the old text is cut, so a
   // reader never finds the file empty.
-  char host[256] = {};
-  ::gethostname(host, sizeof host - 1);
-  const std::string who = "pid " + std::to_string(::getpid()) + " on " + host + "\n";
+  const std::string who = "pid " + std::to_string(::getpid()) + " on " + hostname() + "\n";
   if (::pwrite(fd_, who.data(), who.size(), 0) != static_cast<ssize_t>(who.size()) ||
       ::ftruncate(fd_, static_cast<off_t>(who.size())) != 0) {
     // Unwritten, a second study is still refused; its message then says "pid unknown".

@@ -10,13 +10,14 @@
 #include <unistd.h>
 
 namespace demcal::jobs {
-namespace {
 
 std::string hostname() {
   char buf[256] = {};
   gethostname(buf, sizeof buf - 1);
   return buf;
 }
+
+namespace {
 
 // "This host" is this hostname and this pid namespace: runners in two containers
 // that share a hostname cannot see each other's processes, and judged by pid each

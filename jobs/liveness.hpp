@@ -45,6 +45,7 @@ class BeatWatch {
 };
 
 std::string runner_token();  // this process
+std::string hostname();      // this machine's name, for tokens, part files and lock files
 // Alive as far as this process can tell: a runner on this host by its process (gone,
 // a zombie, or a recycled pid: dead); one on another host by its heartbeat in `store`
 // (silent for kRunnerLeaseS: dead; a runner that never beat, from a demcal before

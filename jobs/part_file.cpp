@@ -1,5 +1,7 @@
 #include "part_file.hpp"
 
+#include "liveness.hpp"
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -12,9 +14,7 @@ PartFile::PartFile(std::string path) : path_(std::move(path)), part_(path_ + ".p
 PartFile::PartFile(std::string path, std::string part) : path_(std::move(path)), part_(std::move(part)) {}
 
 PartFile PartFile::private_to_this_process(std::string path) {
-  char host[256] = {};
-  gethostname(host, sizeof host - 1);
-  std::string part = path + "." + host + "-" + std::to_string(::getpid()) + ".part";
+  std::string part = path + "." + hostname() + "-" + std::to_string(::getpid()) + ".part";
   return PartFile(std::move(path), std::move(part));
 }
 
