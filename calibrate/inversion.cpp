@@ -151,7 +151,7 @@ void apply_sigma(std::vector<Target>& targets, const std::string& text) {
   const auto [name, value] = split_pair(text, "--sigma", "SIGMA");
   double s = 0;
   if (!parse_number(value, s) || !(s > 0))
-    throw JobError("--sigma", "sigma of " + name + " must be a positive number, got \"" + value + "\"");
+    throw JobError("--sigma", "sigma of " + name + " must be a positive finite number, got \"" + value + "\"");
   bool found = false;
   for (auto& t : targets)
     if (t.metric == name) {

@@ -92,7 +92,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "HDF5 output directory for --refine (default: demcal-out next to the database)")->check(kPlainPath);
   cmd->add_option("--format", a->format, "text or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
-    exit_code = guarded("", [&] {
+    const auto body = [&] {
       if (a->format != "text" && a->format != "json")
         throw jobs::JobError("--format", "expected text or json, got \"" + a->format + "\"");
       calibrate::FitRequest req;
@@ -143,7 +143,8 @@ void add_fit(CLI::App& app, int& exit_code) {
         return kRuntime;
       }
       return kOk;
-    });
+    };
+    exit_code = guarded("", [&] { return chosen_job_errors(!a->jobs.empty(), body); });
   });
 }
 

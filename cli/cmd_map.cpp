@@ -30,7 +30,7 @@ void add_map(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)")->check(kPlainPath);
   cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
   cmd->callback([a, &exit_code] {
-    exit_code = guarded("", [&] {
+    const auto body = [&] {
       std::vector<jobs::Where> where;
       for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
       const std::string out = a->out.empty() ? "map_" + a->metric + ".png" : a->out;
@@ -65,7 +65,8 @@ void add_map(CLI::App& app, int& exit_code) {
         std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
                   << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";
       return kOk;
-    });
+    };
+    exit_code = guarded("", [&] { return chosen_job_errors(!a->job.empty(), body); });
   });
 }
 

@@ -44,7 +44,7 @@ void add_merge(CLI::App& app, int& exit_code) {
   cmd->footer(
       "Identical results already in the destination are left alone, so merging a part twice changes nothing. "
       "The same task key with different metrics is a conflict: reported, the destination keeps its result, exit "
-      "code 1. A part that is missing, not a demcal database or of another schema version stops the merge before "
+      "code 1. A part that is missing, not a demcal database or of a schema version this demcal does not merge stops the merge before "
       "anything is written (exit code 2); the merge is one transaction, and a new destination is built beside it "
       "and renamed when whole, so a merge stopped or killed part-way leaves no half-made database.");
   cmd->callback([a, &exit_code] { exit_code = guarded("", [&] { return merge(*a); }); });

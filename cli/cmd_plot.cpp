@@ -68,14 +68,6 @@ void add_plot(CLI::App& app, int& exit_code) {
       db::Store store(a->db, /*read_only=*/true);
       const auto task = store.task(a->task);
       if (!task) throw jobs::JobError("TASK", "no task with id " + std::to_string(a->task));
-      if (a->x.empty() || a->y.empty()) {
-        const PlotDefault* d = plot_default(task->scene, a->series);
-        if (!d)
-          throw jobs::JobError(a->x.empty() ? "--x" : "--y", "required for series \"" + a->series + "\" of a " +
-                                                               task->scene + " task (no default for it)");
-        if (a->x.empty()) a->x = d->x;
-        if (a->y.empty()) a->y = split_commas(d->y);
-      }
       const std::string h5 = jobs::task_hdf5(store, a->task);
       if (h5.empty())
         throw jobs::JobError("TASK", "task " + std::to_string(a->task) + " has no stored series (status " + task->status + ")");
@@ -87,6 +79,25 @@ void add_plot(CLI::App& app, int& exit_code) {
           throw std::runtime_error("the HDF5 file " + h5 + " was written for another task (key " + key + ", task " +
                                    std::to_string(a->task) + " has " + task->key +
                                    "): another run overwrote it; run the task again into a folder of its own");
+      }
+      if (a->x.empty() || a->y.empty()) {
+        const PlotDefault* d = plot_default(task->scene, a->series);
+        if (!d) {
+          // A series the task does not have is the thing to name, not the axes.
+          if (std::filesystem::exists(h5)) {
+            const std::vector<std::string> names = jobs::series_names(h5);
+            if (std::find(names.begin(), names.end(), a->series) == names.end()) {
+              std::string list;
+              for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+              throw jobs::JobError("--series", "task " + std::to_string(a->task) + " has no series \"" + a->series +
+                                                   "\" (available: " + list + ")");
+            }
+          }
+          throw jobs::JobError(a->x.empty() ? "--x" : "--y", "required for series \"" + a->series + "\" of a " +
+                                                               task->scene + " task (no default for it)");
+        }
+        if (a->x.empty()) a->x = d->x;
+        if (a->y.empty()) a->y = split_commas(d->y);
       }
       jobs::PlotRequest r{h5, a->series, a->x, a->y, a->out, "task " + std::to_string(a->task) + ": " + a->series};
       jobs::plot_series(r);

@@ -39,6 +39,16 @@ int guarded(const std::string& context, const std::function<int()>& body) {
   }
 }
 
+int chosen_job_errors(bool job_given, const std::function<int()>& body) {
+  if (job_given) return body();
+  try {
+    return body();
+  } catch (const jobs::JobError& e) {
+    if (e.path() != "--job") throw;
+    throw jobs::JobError("", e.reason());
+  }
+}
+
 namespace {
 
 // Well-formed UTF-8 as RFC 3629 has it (what nlohmann::json accepts): no overlong

@@ -1,5 +1,6 @@
 #include "gnuplot_process.hpp"
 
+#include "job_error.hpp"
 #include "stop_signal.hpp"
 
 #include <cerrno>
@@ -68,8 +69,7 @@ double gnuplot_time_limit_s() {
   char* end = nullptr;
   const double v = std::strtod(env, &end);
   if (*end != '\0' || !std::isfinite(v) || v <= 0)
-    throw std::runtime_error(std::string("DEMCAL_GNUPLOT_TIMEOUT_S='") + env +
-                             "': must be a positive number of seconds");
+    throw JobError("DEMCAL_GNUPLOT_TIMEOUT_S", std::string("must be a positive number of seconds, got '") + env + "'");
   return v;
 }
 

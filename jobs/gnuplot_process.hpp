@@ -19,7 +19,8 @@ class GnuplotInterrupted : public std::runtime_error {
 
 // gnuplot's time limit in seconds: DEMCAL_GNUPLOT_TIMEOUT_S when set to a positive
 // number, else 300 (a chart takes seconds; a gnuplot that waits on something never
-// comes back). Throws std::runtime_error naming the variable when it is not a number.
+// comes back). Throws JobError (bad input, exit 2) naming the variable when it is not
+// a positive number.
 double gnuplot_time_limit_s();
 
 // Runs gnuplot on a script file, stdin from /dev/null. Throws std::runtime_error when

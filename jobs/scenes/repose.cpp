@@ -208,6 +208,20 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
+// The optional keys have no fallback, so a job that leaves them out keeps the keys
+// its tasks had before they existed; one that writes their defaults out asks for the
+// same work and gets the same key (it ran again before).
+nlohmann::json key_params(const nlohmann::json& p) {
+  const engine::ReposeConfig d;
+  nlohmann::json k = p;
+  if (k.contains("side_walls") && k["side_walls"] == engine::to_string(d.side_walls)) k.erase("side_walls");
+  if (k.contains("rest_profile_window") && k["rest_profile_window"].get<double>() == d.rest_profile_window)
+    k.erase("rest_profile_window");
+  if (k.contains("rest_profile_tol_deg") && k["rest_profile_tol_deg"].get<double>() == d.rest_profile_tol_deg)
+    k.erase("rest_profile_tol_deg");
+  return k;
+}
+
 }  // namespace
 
 SceneDef scene_repose() {
@@ -228,7 +242,7 @@ SceneDef scene_repose() {
                   /*work_of=*/"the run to every stage's time limit",
                   /*work_left_out=*/"a heap that comes to rest sooner costs less (tasks measured here took 12-50% of it); once done "
                                     "repose tasks are in the database, validate --db and run forecast at what they cost",
-                  /*key_params=*/nullptr};
+                  /*key_params=*/key_params};
 }
 
 }  // namespace demcal::jobs

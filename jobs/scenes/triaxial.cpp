@@ -176,9 +176,11 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
 // One grain density, however it was written: a factor on material.density is keyed
 // as the density it gives, so that the same work has one key and is reused. The task
 // keeps the spelling its job used (a grid axis, --where).
+// shear_damping written as its default (0, none) is the same work as leaving it out.
 nlohmann::json key_params(const nlohmann::json& p) {
-  if (!p.contains("density_scale")) return p;
   nlohmann::json k = p;
+  if (k.contains("shear_damping") && k["shear_damping"].get<double>() == 0.0) k.erase("shear_damping");
+  if (!k.contains("density_scale")) return k;
   k["scaled_density"] = k.value("density", engine::Material{}.density) * k["density_scale"].get<double>();
   k.erase("density_scale");
   return k;

@@ -506,10 +506,17 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_GT(fs::file_size(d.file("task" + id + "-energy.png")), 1000u);
   EXPECT_NE(r.out.find("task" + id + "-energy.png"), std::string::npos) << r.out;
-  // A series with no default needs its columns named.
-  r = run_demcal({"plot", id, "--series", "profile"}, d.path.string());
-  EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("--x: required for series \"profile\" of a collision task"), std::string::npos) << r.err;
+  // A series the task does not have is named as the fault, with those it has,
+  // whether or not the columns are given (it used to ask for --x, then --y).
+  for (const std::vector<std::string>& cols : {std::vector<std::string>{}, {"--x", "x"}, {"--x", "x", "--y", "h"}}) {
+    std::vector<std::string> args = {"plot", id, "--series", "profile"};
+    args.insert(args.end(), cols.begin(), cols.end());
+    r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 2);
+    EXPECT_NE(r.err.find("--series: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("no series \"profile\""), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("energy"), std::string::npos) << r.err;
+  }
   r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   // An output folder that does not exist is the command line's fault, said before gnuplot runs.

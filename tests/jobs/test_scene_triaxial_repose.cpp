@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tuple>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -486,6 +488,33 @@ TEST(TriaxialReposeScenes, ShearDampingEntersTheTaskOnlyWhenGiven) {
     EXPECT_EQ(damped.tasks[i].params.at("shear_damping").get<double>(), 0.2);
     EXPECT_NE(damped.tasks[i].key, plain.tasks[i].key);
   }
+}
+
+// An optional key written as its default asks for the same work as leaving it out:
+// one key, so the job reuses what the other stored; any other value is other work.
+TEST(TriaxialReposeScenes, AnOptionalKeyWrittenAsItsDefaultIsTheSameTask) {
+  const auto same_keys = [](const json& a, const json& b) {
+    const Job x = parse(a), y = parse(b);
+    if (x.tasks.size() != y.tasks.size()) return false;
+    for (std::size_t i = 0; i < x.tasks.size(); ++i)
+      if (x.tasks[i].key != y.tasks[i].key) return false;
+    return true;
+  };
+  const json repose = repose_base();
+  for (const auto& [key, dflt, other] : std::vector<std::tuple<std::string, json, json>>{
+           {"side_walls", "periodic", "smooth"}, {"rest_profile_window", 0.5, 0.4}, {"rest_profile_tol_deg", 0.2, 0.3}}) {
+    json a = repose, b = repose;
+    a["repose"][key] = dflt;
+    b["repose"][key] = other;
+    EXPECT_TRUE(same_keys(repose, a)) << key;
+    EXPECT_FALSE(same_keys(repose, b)) << key;
+    EXPECT_EQ(parse(a).tasks[0].params.at(key), dflt) << "the task keeps the job's spelling";
+  }
+  json t = triaxial_base(), damped = triaxial_base();
+  t["triaxial"]["shear_damping"] = 0.0;
+  damped["triaxial"]["shear_damping"] = 0.1;
+  EXPECT_TRUE(same_keys(triaxial_base(), t));
+  EXPECT_FALSE(same_keys(triaxial_base(), damped));
 }
 
 // The grain density written as a factor on material.density, as the density itself,
