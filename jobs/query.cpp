@@ -74,7 +74,10 @@ void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t colu
     if (m.error.empty() && m.warning.empty()) continue;
     const std::string text = m.error.empty() ? db::warning_message(m.warning) : m.error;
     const std::size_t k = groups.add(text, rows[i].task.id);
-    t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + (m.error.empty() ? "warning" : "error");
+    // A pending or running task's text is why it went back to the queue (interrupted,
+    // its runner gone): a note, not the task's failure.
+    const char* kind = !m.error.empty() ? (rows[i].task.status == "failed" ? "error" : "note") : "warning";
+    t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + kind;
   }
   for (std::size_t k = 0; k < groups.texts.size(); ++k) {
     std::string text = groups.texts[k];

@@ -145,6 +145,11 @@ TEST(Runner, SigtermStopsRunningTasksForRetry) {
   EXPECT_EQ(count_status(rows, "running"), 0);
   EXPECT_EQ(count_status(rows, "failed"), 0);
   EXPECT_GE(count_status(rows, "pending"), 1);
+  // Why a task is pending again is a note in query's table, not an error.
+  const Result q = run_demcal({"query", "--job", "term"}, d.path.string());
+  EXPECT_NE(q.out.find("[1] note"), std::string::npos) << q.out;
+  EXPECT_EQ(q.out.find("] error"), std::string::npos) << q.out;
+  EXPECT_NE(q.out.find("interrupted; will be retried"), std::string::npos) << q.out;
   EXPECT_EQ(run_demcal({"run", "j.json"}, d.path.string()).rc, 0);
   EXPECT_EQ(count_status(tasks_of(db, "term"), "done"), 4);
 }
