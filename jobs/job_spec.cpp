@@ -13,6 +13,7 @@
 #include <fstream>
 #include <regex>
 #include <set>
+#include <iomanip>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -161,8 +162,11 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
       if (t.params.contains(a)) where += (where.empty() ? "" : ", ") + a + "=" + t.params[a].dump();
     std::ostringstream os;
     os.precision(4);
-    os << "#" << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt = " << f.dt
-       << " s exceeds the critical step " << f.dt_critical << " s of the " << f.mode
+    // The forecast takes the grading's extreme diameters, the run its sample's smallest
+    // and largest grains: the engine's figures differ by a few per cent, hence "about".
+    os << "#" << t.index << (where.empty() ? "" : " (" + where + ")") << ": dt exceeds the critical step of the "
+       << f.mode << " by about " << std::setprecision(3) << f.dt / f.dt_critical << "x" << std::setprecision(4) << " ("
+       << f.dt << " s against " << f.dt_critical << " s for the grading's extreme diameters)"
        << (f.refused ? "; the engine will refuse it"
                      : "; allow_unstable_dt runs it anyway, and the instability detector judges it");
     job.notes.push_back(os.str());
