@@ -465,10 +465,10 @@ Series triaxial_series() {
   s.columns = {"eps1",  "eps2",   "eps3",    "eps_v", "porosity", "porosity_interior", "sigma1", "sigma2", "sigma3",
                "p",     "q",      "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "lw_p",
                "lw_q",  "z_all",  "z_mech",  "kinetic", "ufr",    "inertial", "time", "step",
-               "z_interior", "z_mech_interior"};
+               "z_interior", "z_mech_interior", "lw_xy", "lw_xz", "lw_yz"};
   s.units = {"1",  "1",  "1",  "1",   "1",   "1",  "Pa", "Pa", "Pa", "Pa", "Pa", "1", "deg",
              "Pa", "Pa", "Pa", "Pa", "Pa", "1",  "1",  "J",  "1",  "1",  "s",  "1",
-             "1",  "1"};
+             "1",  "1",  "Pa", "Pa", "Pa"};
   return s;
 }
 
@@ -599,7 +599,11 @@ struct ShearRecorder {
     res.series.add({e1, e2, e3, ev, rig.porosity(), n_in, s1, s2, s3, pm, q, pm > 0 ? q / pm : 0.0,
                     sine_to_deg(mobilised_sine(s1, s2, s3)), lw(0, 0), lw(1, 1), lw(2, 2), lwp, lwq,
                     z.all, z.mechanical, kinetic_energy(world.particles()), ufr, inertial, world.time(),
-                    static_cast<double>(world.step_count()), z_in.all, z_in.mechanical},
+                    static_cast<double>(world.step_count()), z_in.all, z_in.mechanical,
+                    // The symmetric shear components (the antisymmetric part is the rolling
+                    // moments' couple stress): near zero while the principal axes stay the
+                    // box's (frictionless walls), so they show when a shear band tilts them.
+                    0.5 * (lw(0, 1) + lw(1, 0)), 0.5 * (lw(0, 2) + lw(2, 0)), 0.5 * (lw(1, 2) + lw(2, 1))},
                    rig.obs);
     return e1;
   }

@@ -358,8 +358,14 @@ TEST(TriaxialScene, SeriesHasTheDocumentedColumnsAndSampling) {
   ASSERT_TRUE(r.outcome.ok());
   for (const char* c : {"eps1", "eps2", "eps3", "eps_v", "porosity", "sigma1", "sigma2", "sigma3", "p", "q",
                         "q_over_p", "phi_mob_deg", "lw_xx", "lw_yy", "lw_zz", "z_all", "z_mech", "kinetic", "ufr",
-                        "inertial", "z_interior", "z_mech_interior"})
+                        "inertial", "z_interior", "z_mech_interior", "lw_xy", "lw_xz", "lw_yz"})
     EXPECT_NO_THROW(r.series.column(c)) << c;
+  // Frictionless walls hold the principal axes near the box's: after preparation the
+  // interior's shear stresses are a small fraction of its pressure.
+  for (const char* c : {"lw_xy", "lw_xz", "lw_yz"}) {
+    EXPECT_LT(std::abs(col(r, 0, c)), 0.1 * col(r, 0, "lw_p")) << c;
+    EXPECT_NE(col(r, 0, c), 0.0) << c << ": a random packing is never exactly symmetric";
+  }
   // Grains at the walls lose the walls' contacts in the whole-box count: the interior
   // (the Love-Weber volume) is better connected after preparation.
   EXPECT_GT(col(r, 0, "z_interior"), col(r, 0, "z_all") + 0.2);
