@@ -1,9 +1,14 @@
 // demcal: batch DEM calibration. Thin CLI11 subcommands over the jobs and db layers.
 #include "common.hpp"
 
+#include <csignal>
 #include <iostream>
 
 int main(int argc, char** argv) {
+  // A reader that goes away (`demcal run JOB | head`, a closed terminal, a killed
+  // tee) must not kill a run, a study or a merge half-way: writes to it fail
+  // quietly, and the work goes on to store its results.
+  std::signal(SIGPIPE, SIG_IGN);
   CLI::App app{"demcal: DEM calibration runs, results and maps"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "demcal 0.1.0");

@@ -28,6 +28,7 @@ pid_t start_gnuplot(const std::string& script) {
     setpgid(0, 0);
     signal(SIGINT, SIG_DFL);
     signal(SIGTERM, SIG_DFL);
+    signal(SIGPIPE, SIG_DFL);  // demcal ignores it; an ignored signal would stay so across exec
     const int null = open("/dev/null", O_RDONLY);
     if (null >= 0) dup2(null, STDIN_FILENO);  // a script that pauses for input fails instead of waiting
     execlp("gnuplot", "gnuplot", script.c_str(), static_cast<char*>(nullptr));

@@ -154,6 +154,32 @@ TEST(Runner, SigtermStopsRunningTasksForRetry) {
   EXPECT_EQ(count_status(tasks_of(db, "term"), "done"), 4);
 }
 
+TEST(Runner, AReaderThatGoesAwayDoesNotStopTheRun) {
+  // `demcal run JOB | head`: the reader closes the pipe after a few lines. SIGPIPE
+  // killed the runner and left its task 'running' under a dead runner.
+  TempDir d;
+  write(d.file("j.json"), collision_job("pipe", {0.05, 0.06, 0.07, 0.08}, 60, 3000));
+  int fds[2];
+  ASSERT_EQ(pipe(fds), 0);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fds[0]);
+    dup2(fds[1], 1);
+    dup2(fds[1], 2);
+    if (chdir(d.path.c_str()) != 0) _exit(126);
+    execl(DEMCAL_BIN, DEMCAL_BIN, "run", "j.json", "--workers", "1", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(fds[1]);
+  char buf[64];
+  ASSERT_GT(read(fds[0], buf, sizeof buf), 0);  // the first words, then no reader
+  close(fds[0]);
+  int st = 0;
+  waitpid(pid, &st, 0);
+  EXPECT_TRUE(WIFEXITED(st)) << "killed by signal " << (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
+  EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "pipe"), "done"), 4);
+}
+
 TEST(Runner, TwoRunnersOfOneJobShareItsTasksAndRunEachOnce) {
   // Two runners of the same job at once contend for every claim: each task must be
   // run exactly once between them, and both must end cleanly.
