@@ -385,15 +385,20 @@ TEST(CalibrateCli, ImpossibleTargetsAndPinnedAxesAreRefusedAndNothingIsStored) {
   EXPECT_TRUE(s.fits().empty());
 }
 
+// A database with a map drawn from it at m.png; returns the image.
+std::string draw_good_map(const TempDir& d) {
+  make_db(d, false);
+  const auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  return slurp(d.file("m.png"));
+}
+
 TEST(CalibrateCli, AFailedGnuplotLeavesTheEarlierMapWhole) {
   // A gnuplot that dies while drawing (killed, disk full) must not leave a broken
   // image where the user's good one was: the map is drawn beside it, then renamed.
   TempDir d;
   const std::string dir = d.path.string();
-  make_db(d, false);
-  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
-  ASSERT_EQ(r.rc, 0) << r.err;
-  const std::string good = slurp(d.file("m.png"));
+  const std::string good = draw_good_map(d);
   ASSERT_GT(good.size(), 1000u);
   // The stand-in runs the real gnuplot for scripts that draw nothing (the contour
   // tables) and, for the image, starts the file and fails.
@@ -404,8 +409,8 @@ TEST(CalibrateCli, AFailedGnuplotLeavesTheEarlierMapWhole) {
               "if [ -z \"$out\" ]; then PATH=" + std::string(std::getenv("PATH")) + " exec gnuplot \"$@\"; fi\n"
               "printf 'PNG' > \"$out\"\nexit 1\n");
   fs::permissions(fake, fs::perms::owner_all);
-  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
-                 {{"PATH", (d.path / "bin").string() + ":" + std::getenv("PATH")}});
+  const auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
+                            {{"PATH", (d.path / "bin").string() + ":" + std::getenv("PATH")}});
   EXPECT_EQ(r.rc, 1) << r.err;
   EXPECT_NE(r.err.find("gnuplot failed"), std::string::npos) << r.err;
   EXPECT_EQ(slurp(d.file("m.png")), good);
@@ -450,12 +455,10 @@ void expect_nothing_left(const TempDir& d, const std::string& good) {
 TEST(CalibrateCli, AGnuplotThatHangsIsStoppedAtItsTimeLimit) {
   TempDir d;
   const std::string dir = d.path.string();
-  make_db(d, false);
-  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
-  ASSERT_EQ(r.rc, 0) << r.err;
-  const std::string good = slurp(d.file("m.png"));
+  const std::string good = draw_good_map(d);
+  ASSERT_GT(good.size(), 1000u);
   const std::string path = hanging_gnuplot(d);
-  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
+  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
                  {{"PATH", path}, {"TMPDIR", (d.path / "tmp").string()}, {"DEMCAL_GNUPLOT_TIMEOUT_S", "1"}});
   EXPECT_EQ(r.rc, 1) << r.err;
   EXPECT_NE(r.err.find("gnuplot did not finish within 1 s"), std::string::npos) << r.err;
@@ -470,17 +473,15 @@ TEST(CalibrateCli, SigtermWhileGnuplotDrawsStopsItAndLeavesNothingBehind) {
   for (const int sig : {SIGTERM, SIGINT}) {
     TempDir d;
     const std::string dir = d.path.string();
-    make_db(d, false);
-    auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.png"}, dir);
-    ASSERT_EQ(r.rc, 0) << r.err;
-    const std::string good = slurp(d.file("m.png"));
+    const std::string good = draw_good_map(d);
+    ASSERT_GT(good.size(), 1000u);
     const std::string path = hanging_gnuplot(d);
     const pid_t pid = spawn({"map", "--metric", "phi_peak", "--out", "m.png"}, dir,
                             {{"PATH", path}, {"TMPDIR", (d.path / "tmp").string()}});
     for (int i = 0; i < 3000 && !fs::exists(d.file("gnuplot.pid")); ++i) usleep(10000);
     ASSERT_TRUE(fs::exists(d.file("gnuplot.pid")));
     kill(pid, sig);
-    r = finish(pid, dir);
+    const Result r = finish(pid, dir);
     EXPECT_EQ(r.rc, 1) << r.err;
     EXPECT_NE(r.err.find(sig == SIGTERM ? "terminated (SIGTERM) while gnuplot was drawing"
                                         : "interrupted (SIGINT) while gnuplot was drawing"),
