@@ -4,6 +4,7 @@
 
 #include "jobs/job_error.hpp"
 #include "jobs/series_plot.hpp"
+#include "jobs/stop_signal.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -111,6 +112,9 @@ std::string fit_targets(const std::string& targets_json, const MetricSpec& wante
 }  // namespace
 
 void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
+  // Ctrl-C or SIGTERM between the gnuplot passes is recorded and ends the next pass
+  // before it starts: the scratch folder and the part image are removed on the way out.
+  const jobs::StopSignalGuard stop_guard;
   const std::string ext = extension_of(r.out);
   if (ext != ".png" && ext != ".svg") throw jobs::JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
   if (rs.thetas.size() < 2 || rs.etas.size() < 2)

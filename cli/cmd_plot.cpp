@@ -84,8 +84,13 @@ void add_plot(CLI::App& app, int& exit_code) {
         const PlotDefault* d = plot_default(task->scene, a->series);
         if (!d) {
           // A series the task does not have is the thing to name, not the axes.
-          if (std::filesystem::exists(h5)) {
-            const std::vector<std::string> names = jobs::series_names(h5);
+          std::vector<std::string> names;
+          try {
+            if (std::filesystem::exists(h5)) names = jobs::series_names(h5);
+          } catch (const std::runtime_error&) {
+            // an unreadable file is plot_series' to report; the axes are asked for here
+          }
+          if (!names.empty()) {
             if (std::find(names.begin(), names.end(), a->series) == names.end()) {
               std::string list;
               for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;

@@ -14,7 +14,7 @@ enum Exit { kOk = 0, kRuntime = 1, kBadInput = 2 };
 // code: JobError and bad database files -> 2, everything else -> 1.
 int guarded(const std::string& context, const std::function<int()>& body);
 
-// For map, fit and envelope run without --job: demcal chose the job, so an error
+// For map and fit run without --job: demcal chose the job, so an error
 // JobError("--job", …) raises about it is said without the "--job:" the user did not
 // write (the reason names the job). With --job given, errors pass unchanged.
 int chosen_job_errors(bool job_given, const std::function<int()>& body);

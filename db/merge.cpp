@@ -399,9 +399,21 @@ MergeReport merge_databases(const std::string& into, const std::vector<std::stri
   // killed part-way leaves no empty database where the merged one should be, only
   // a part file that says what it is. Created exclusively: a file of that name is
   // not ours to remove.
-  const std::string part = into + ".merging-" + std::to_string(::getpid()) + ".part";
-  const int fd = ::open(part.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
-  if (fd < 0) throw DbError("cannot create " + part + " for the merged database: " + std::strerror(errno));
+  // The pid alone can repeat (a container's, after a killed merge left its part):
+  // the next free number is taken.
+  std::string part;
+  int fd = -1;
+  for (int n = 0; fd < 0 && n < 100; ++n) {
+    part = into + ".merging-" + std::to_string(::getpid()) + (n ? "-" + std::to_string(n) : "") + ".part";
+    fd = ::open(part.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
+    if (fd < 0 && errno != EEXIST) break;
+  }
+  if (fd < 0) {
+    const int err = errno;
+    const bool folder = err == ENOENT || err == ENOTDIR || err == EACCES || err == EROFS || err == EPERM;
+    throw DbError("cannot create the merged database " + into + " (its part file " + part + "): " + std::strerror(err),
+                  /*bad_input=*/folder);
+  }
   ::close(fd);
   try {
     MergeReport report = merge_into(part, into, parts, stop);  // closed here: the WAL is folded in

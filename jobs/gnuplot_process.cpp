@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <fcntl.h>
 #include <sstream>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -20,9 +21,14 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 pid_t start_gnuplot(const std::string& script) {
+  const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
   if (pid == 0) {
+    // Out of demcal's group, a kill of that group (a closed terminal, the OOM killer
+    // taking demcal) would not reach gnuplot: it dies with demcal instead.
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(127);
     // Its own group, so that stopping it reaches whatever it starts, and a terminal's
     // Ctrl-C reaches demcal, which decides.
     setpgid(0, 0);
@@ -76,7 +82,7 @@ double gnuplot_time_limit_s() {
 
 void run_gnuplot_script(const std::string& script) {
   const double limit_s = gnuplot_time_limit_s();
-  StopSignalGuard guard;  // nests inside a runner's or a study's
+  StopSignalGuard guard;  // nests inside map's, which covers its work between the passes
   if (stop_signal()) throw GnuplotInterrupted(stop_signal());
   const pid_t pid = start_gnuplot(script);
   const auto start = Clock::now();
@@ -96,7 +102,6 @@ void run_gnuplot_script(const std::string& script) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  if (stop_signal()) throw GnuplotInterrupted(stop_signal());  // gnuplot took the terminal's Ctrl-C too
   if (WIFSIGNALED(st))
     throw std::runtime_error("gnuplot was killed by signal " + std::to_string(WTERMSIG(st)) + " while drawing");
   if (!WIFEXITED(st) || WEXITSTATUS(st) == 127) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");

@@ -322,12 +322,16 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     // was busy is read first.
     const auto now = Clock::now();
     heartbeat.tick();  // rank 0's own, for runs on other hosts
-    if (now - last_file_check > std::chrono::seconds(2)) {
-      // A deleted database takes every result stored from now on with it: stop
-      // handing out work at once, not when the queue runs dry.
+    if (s.database_lost.empty() && now - last_file_check > std::chrono::seconds(2)) {
+      // A deleted database takes every result stored from now on with it: hand out
+      // no more work. The running tasks' results are still received (a rank blocked
+      // sending a large one would hang the job), and the loop ends when no rank is busy.
       last_file_check = now;
       s.database_lost = database_lost(store);
-      if (!s.database_lost.empty()) break;
+      if (!s.database_lost.empty()) {
+        queue.clear();
+        log << "\n" << s.database_lost << ": no more tasks handed out; the running ones finish first\n";
+      }
     }
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];
@@ -426,7 +430,6 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   }
   g_dismissed = true;
   if (s.database_lost.empty()) s.database_lost = database_lost(store);  // a run shorter than 2 s, or its end
-  else log << "\n" << s.database_lost << ": no more tasks handed out; the ranks stop after their current task\n";
   if (!queue.empty() && !s.interrupted && s.output_failure.empty() && s.database_lost.empty())
     log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
   progress.finish();

@@ -6,7 +6,7 @@
 namespace demcal::jobs {
 namespace {
 volatile std::sig_atomic_t g_stop = 0;
-int g_depth = 0;  // guards nest (a study charts after its run); only the outermost installs
+int g_depth = 0;  // guards nest (map around its gnuplot passes); only the outermost installs
 extern "C" void on_stop_signal(int sig) { g_stop = sig; }
 }  // namespace
 
