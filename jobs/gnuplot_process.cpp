@@ -1,5 +1,6 @@
 #include "gnuplot_process.hpp"
 
+#include "child_process.hpp"
 #include "job_error.hpp"
 #include "stop_signal.hpp"
 
@@ -10,7 +11,6 @@
 #include <cstdlib>
 #include <fcntl.h>
 #include <sstream>
-#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -21,14 +21,11 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 pid_t start_gnuplot(const std::string& script) {
-  const pid_t parent = getpid();
-  const pid_t pid = fork();
+  // Bound to demcal: out of demcal's group, a kill of that group (a closed terminal,
+  // the OOM killer taking demcal) would not reach gnuplot.
+  const pid_t pid = fork_bound_to_parent(127);
   if (pid < 0) throw std::runtime_error("cannot start gnuplot: fork failed");
   if (pid == 0) {
-    // Out of demcal's group, a kill of that group (a closed terminal, the OOM killer
-    // taking demcal) would not reach gnuplot: it dies with demcal instead.
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(127);
     // Its own group, so that stopping it reaches whatever it starts, and a terminal's
     // Ctrl-C reaches demcal, which decides.
     setpgid(0, 0);

@@ -1,6 +1,7 @@
 #include "runner.hpp"
 #include "job_error.hpp"
 
+#include "child_process.hpp"
 #include "liveness.hpp"
 #include "physics_version.hpp"
 #include "stop_signal.hpp"
@@ -19,7 +20,6 @@
 #include <iostream>
 #include <sstream>
 #include <sched.h>
-#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unordered_map>
@@ -218,18 +218,15 @@ void Runner::launch(const db::TaskRow& row) {
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
-  const pid_t parent = getpid();
   // fork() rather than re-exec: the child already holds the resolved task and the
   // engine, nothing needs serialising, and start-up costs nothing. The child never
   // uses the inherited SQLite connection and leaves with _exit().
-  const pid_t pid = fork();
+  const pid_t pid = fork_bound_to_parent(4);  // a runner killed with -9 takes its workers along
   if (pid < 0) {
     store_.release(row.id, token_, "fork failed");
     throw std::runtime_error("fork failed");
   }
   if (pid == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);  // a runner killed with -9 takes its workers along
-    if (getppid() != parent) _exit(4);
     signal(SIGINT, SIG_IGN);  // the parent decides what an interrupt means
     signal(SIGTERM, SIG_DFL);
     _exit(run_worker(t));

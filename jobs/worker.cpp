@@ -1,5 +1,6 @@
 #include "worker.hpp"
 
+#include "child_process.hpp"
 #include "hdf5_writer.hpp"
 #include "part_file.hpp"
 #include "xdmf_writer.hpp"
@@ -16,7 +17,6 @@
 #include <cstring>
 #include <filesystem>
 #include <iostream>
-#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -208,14 +208,11 @@ std::string run_forked(const WorkerTask& t, double tick_s, const std::function<v
   std::cerr.flush();
   std::fflush(nullptr);
   const auto t0 = std::chrono::steady_clock::now();
-  const pid_t parent = getpid();
-  const pid_t pid = fork();
+  // As in the local runner: the child dies with its parent, never touches anything
+  // it inherited (here: MPI) and leaves with _exit().
+  const pid_t pid = fork_bound_to_parent(4);
   if (pid < 0) throw std::runtime_error("fork failed");
   if (pid == 0) {
-    // As in the local runner: the child dies with its parent, never touches
-    // anything it inherited (here: MPI) and leaves with _exit().
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(4);
     signal(SIGINT, SIG_IGN);
     signal(SIGTERM, SIG_DFL);
     _exit(run_worker(t));
