@@ -5,7 +5,10 @@
 #include <strings.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <vector>
 
@@ -184,7 +187,35 @@ void Statement::reset() {
 }
 
 std::int64_t Statement::int64(int col) const { return sqlite3_column_int64(st_, col); }
-double Statement::real(int col) const { return is_null(col) ? NAN : sqlite3_column_double(st_, col); }
+double Statement::real(int col) const {
+  switch (sqlite3_column_type(st_, col)) {
+    case SQLITE_NULL:
+      return NAN;
+    case SQLITE_TEXT:
+    case SQLITE_BLOB:
+      return real_from_text(col);
+    default:
+      return sqlite3_column_double(st_, col);
+  }
+}
+
+// SQLite keeps text that does not read as a number (a value written by hand: "nan",
+// "1,5", "-") as text in a REAL column, and sqlite3_column_double reads such text as 0:
+// a metric would be silently zero. Text that reads whole as a number (strtod: "nan" and
+// "inf" too) is that number; anything else names the column and the text.
+double Statement::real_from_text(int col) const {
+  const std::string t = text(col);
+  const char* begin = t.c_str();
+  char* end = nullptr;
+  const double v = std::strtod(begin, &end);
+  while (end && *end != '\0' && std::isspace(static_cast<unsigned char>(*end))) ++end;
+  if (!t.empty() && end != begin && end && *end == '\0' && t.size() == std::strlen(begin)) return v;
+  const char* name = sqlite3_column_name(st_, col);
+  const std::string shown = t.size() > 40 ? t.substr(0, 40) + "..." : t;
+  throw DbError(conn_->path() + ": column " + (name ? name : "?") + " holds the text \"" + shown +
+                    "\" where a number belongs (a damaged or hand-edited database)",
+                true);
+}
 std::string Statement::text(int col) const {
   const auto* p = sqlite3_column_text(st_, col);
   return p ? std::string(reinterpret_cast<const char*>(p), static_cast<std::size_t>(sqlite3_column_bytes(st_, col)))

@@ -81,11 +81,12 @@ class Statement {
   void reset();
 
   std::int64_t int64(int col) const;
-  double real(int col) const;  // NULL reads as NaN
+  double real(int col) const;  // NULL reads as NaN; text that is not a number throws DbError
   std::string text(int col) const;  // NULL reads as ""
   bool is_null(int col) const;
 
  private:
+  double real_from_text(int col) const;
   Connection* conn_;
   sqlite3_stmt* st_ = nullptr;
 };

@@ -219,6 +219,32 @@ TEST(Store, ClaimIsExclusiveAndFinishStoresResults) {
   EXPECT_EQ(s.counts("j")["j"]["pending"], 1);
 }
 
+// A value edited by hand into a REAL column stays text when SQLite cannot read it as a
+// number; sqlite3_column_double would read it as 0, a silently wrong metric.
+TEST(Store, AMetricHeldAsTextReadsAsItsNumberOrNamesTheText) {
+  TempDir d;
+  const std::string path = d.file("a.db");
+  std::int64_t id = 0;
+  {
+    Store s(path);
+    s.put_job("j", "{}", tasks({"k1"}));
+    id = s.tasks("j")[0].id;
+    ASSERT_TRUE(s.claim(id, "w1"));
+    ASSERT_TRUE(s.finish(id, "w1", done_with(2.0)));
+  }
+  raw_sql(path, "UPDATE metrics SET value = 'nan' WHERE name = 'm'; UPDATE metrics SET value = '-Inf' WHERE name = 'drift'");
+  {
+    Store s(path);
+    const auto m = s.metrics(id);
+    ASSERT_EQ(m.size(), 2u);
+    EXPECT_TRUE(std::isnan(m[0].second)) << m[0].second;
+    EXPECT_TRUE(std::isinf(m[1].second) && m[1].second < 0) << m[1].second;
+  }
+  raw_sql(path, "UPDATE metrics SET value = '1,5' WHERE name = 'm'");
+  Store s(path);
+  expect_bad_input([&] { s.metrics(id); }, "column value holds the text \"1,5\" where a number belongs");
+}
+
 TEST(Store, OverlappingJobsShareTasksByKey) {
   TempDir d;
   Store s(d.file("a.db"));
