@@ -2,6 +2,7 @@
 
 #include "child_process.hpp"
 #include "job_error.hpp"
+#include "progress.hpp"
 #include "stop_signal.hpp"
 
 #include <cerrno>
@@ -10,7 +11,6 @@
 #include <csignal>
 #include <cstdlib>
 #include <fcntl.h>
-#include <sstream>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -54,12 +54,6 @@ void stop_gnuplot(pid_t pid, int sig) {
   }
 }
 
-std::string seconds(double s) {
-  std::ostringstream o;
-  o << s;
-  return o.str();
-}
-
 }  // namespace
 
 GnuplotInterrupted::GnuplotInterrupted(int signal)
@@ -94,7 +88,7 @@ void run_gnuplot_script(const std::string& script) {
     }
     if (std::chrono::duration<double>(Clock::now() - start).count() > limit_s) {
       stop_gnuplot(pid, SIGKILL);
-      throw std::runtime_error("gnuplot did not finish within " + seconds(limit_s) +
+      throw std::runtime_error("gnuplot did not finish within " + plain_number(limit_s) +
                                " s and was stopped (DEMCAL_GNUPLOT_TIMEOUT_S sets the limit)");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));

@@ -78,12 +78,6 @@ void test_root_stall_hook() {
   if (env && *env) std::this_thread::sleep_for(std::chrono::duration<double>(std::atof(env)));
 }
 
-std::string format_s(double s) {
-  std::ostringstream o;
-  o << s;
-  return o.str();
-}
-
 }  // namespace
 
 Session::Session() {
@@ -340,8 +334,8 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
       if (k.task && silent > mpi.timeout_s) {
         k.lost = true;
         g_rank_lost = true;
-        log << "worker rank " << r << " lost: no message for " << format_s(mpi.timeout_s) << " s\n";
-        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + format_s(mpi.timeout_s) +
+        log << "worker rank " << r << " lost: no message for " << plain_number(mpi.timeout_s) << " s\n";
+        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + plain_number(mpi.timeout_s) +
                          " s); rerun with --retry-failed");
       } else if (!k.started && silent > std::max(600.0, 10 * mpi.timeout_s)) {
         k.lost = true;

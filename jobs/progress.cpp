@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <sstream>
 
 namespace demcal::jobs {
 
@@ -18,6 +19,12 @@ std::string format_duration(double s) {
   else
     std::snprintf(buf, sizeof buf, "%ld:%02ld", t / 60, t % 60);
   return buf;
+}
+
+std::string plain_number(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
 }
 
 Progress::Progress(std::ostream& err, bool terminal) : err_(err), terminal_(terminal) {}

@@ -40,5 +40,7 @@ class Progress {
 };
 
 std::string format_duration(double seconds);
+// A number as a stream writes it (6 significant digits, no trailing zeros): "0.5", "300".
+std::string plain_number(double v);
 
 }  // namespace demcal::jobs

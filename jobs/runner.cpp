@@ -23,6 +23,7 @@
 #include <sys/wait.h>
 #include <thread>
 #include <unordered_map>
+#include <malloc.h>
 #include <unistd.h>
 
 namespace demcal::jobs {
@@ -63,16 +64,25 @@ class Runner {
   void reap(bool stopping);
   void handle_exit(const Running& r, int wstatus, bool stopping);
   void stop_all();
-  Counts counts();
+  // The job's counts read from the database: a GROUP BY over its tasks, ~13 ms at
+  // 10,000 tasks, so a run reads them every 2 s and keeps its own tally between
+  // (`count_ended`); other runners' progress shows at the next read.
+  Counts read_counts();
+  void count_ended(const std::string& status);
   std::string describe_task(std::size_t index, std::int64_t task_id) const;
   // Says, once per change, which other runners hold the tasks this run waits on.
   void say_holders(std::string& said);
   // Wall seconds left for this run's queued and running tasks: their forecast at the
   // speed measured in the database (re-measured as tasks finish); without a forecast,
   // the mean of the tasks this run finished. A bound while the forecast is one.
+  // Cached for a second (the loop asks every 20 ms, and a forecast walks the whole
+  // queue: ~5 ms at 100,000 tasks); a finished task makes it stale at once.
   Eta eta();
+  Eta eta_now();
   double forecast_eta(bool bound) const;  // bound: every task to its limit, at the yardstick
   void forecast_new_tasks();
+  // After a task finishes: its CPU time is in the database now. At most every 2 s once
+  // a speed is known (the query reads every done task of the scene).
   void measure_speed_now();
 
   db::Store& store_;
@@ -91,6 +101,9 @@ class Runner {
   BeatWatch beats_;  // other hosts' heartbeats, watched on this process's clock
   bool work_is_bound_ = false;  // the scene's forecast is every stage to its limit (a bound until measured)
   Counts counts_;
+  Eta eta_;
+  bool eta_stale_ = true;
+  std::chrono::steady_clock::time_point eta_at_, speed_at_;
   const std::string spec_ = job_.spec.dump();  // as record_job stores it
   bool superseded_ = false;  // another run recorded another spec under this job's name
   std::string output_failure_;  // the first task that could not write into the output folder, and why
@@ -146,6 +159,7 @@ void Runner::prepare() {
       std::vector<nlohmann::json> params;
       for (const auto& t : queue_) params.push_back(nlohmann::json::parse(t.params_json));
       speed_ = measure_speed(store_, *scene_, threads_);
+      speed_at_ = std::chrono::steady_clock::now();
       const WorkForecast w = forecast_work(*scene_, params, speed_);
       for (std::size_t k = 0; k < queue_.size(); ++k) yardstick_s_[queue_[k].id] = w.task_core_seconds[k] / w.factor();
       work_is_bound_ = w.bounded_scene;
@@ -153,6 +167,9 @@ void Runner::prepare() {
     }
   } catch (const std::exception&) {
   }
+  // The job's expansion, the queue and the forecast's parsed parameters took ~460 MB
+  // at 100,000 tasks, and freed heap stays mapped: every fork copies its page tables.
+  malloc_trim(0);
 }
 
 // Tasks queued since the start (re-queued from a runner that is gone) get their
@@ -234,10 +251,17 @@ void Runner::launch(const db::TaskRow& row) {
   store_.set_pid(row.id, pid);
   running_.push_back(Running{row.id, t.index, pid, t.result_path, std::chrono::steady_clock::now()});
   progress_.set_eta(eta());
-  progress_.line(describe_task(t.index, row.id) + " started", counts());
+  ++counts_.running;
+  progress_.line(describe_task(t.index, row.id) + " started", counts_);
 }
 
-Counts Runner::counts() {
+void Runner::count_ended(const std::string& status) {
+  --counts_.running;
+  if (status == "done") ++counts_.done;
+  if (status == "failed") ++counts_.failed;
+}
+
+Counts Runner::read_counts() {
   Counts c;
   for (const auto& [job, by_status] : store_.counts(job_.name))
     for (const auto& [status, n] : by_status) {
@@ -275,16 +299,28 @@ double Runner::forecast_eta(bool bound) const {
   return makespan(queued, free_at, workers_);
 }
 
-// After a task finishes: its CPU time is in the database now.
 void Runner::measure_speed_now() {
   if (yardstick_s_.empty()) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (speed_.tasks > 0 && now - speed_at_ < std::chrono::seconds(2)) return;
   try {
     speed_ = measure_speed(store_, *scene_, threads_);
+    speed_at_ = now;
   } catch (const std::exception&) {  // a forecast only
   }
 }
 
 Eta Runner::eta() {
+  const auto now = std::chrono::steady_clock::now();
+  if (eta_stale_ || now - eta_at_ > std::chrono::seconds(1)) {
+    eta_ = eta_now();
+    eta_at_ = now;
+    eta_stale_ = false;
+  }
+  return eta_;
+}
+
+Eta Runner::eta_now() {
   if (!yardstick_s_.empty()) {
     const double s = forecast_eta(false);
     // A scene whose forecast is a bound keeps it in sight once measured: the tasks
@@ -310,7 +346,8 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   std::filesystem::remove(r.result_path, gone);
   if (!out && stopping) {
     store_.release(r.task_id, token_, "interrupted; will be retried");
-    progress_.line(describe_task(r.index, r.task_id) + " interrupted, back in the queue", counts());
+    count_ended("pending");
+    progress_.line(describe_task(r.index, r.task_id) + " interrupted, back in the queue", counts_);
     return;
   }
   if (!out) {
@@ -323,25 +360,29 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
     // Not the task's failure: it goes back to the queue, for the run after the folder is fixed.
     if (output_failure_.empty()) output_failure_ = describe_task(r.index, r.task_id) + ": " + out->error;
     store_.release(r.task_id, token_, "could not write its files: " + out->error + "; will be retried");
+    count_ended("pending");
     progress_.line(describe_task(r.index, r.task_id) + " could not write its files, back in the queue: " + out->error,
-                   counts());
+                   counts_);
     return;
   }
   if (!store_.finish(r.task_id, token_, *out)) {
     // This run was judged gone (silent past the lease) and another took the task over.
+    count_ended("running");
     progress_.line(describe_task(r.index, r.task_id) + " " + out->status + " here, but another runner took it over "
                    "meanwhile (this run's heartbeat was judged stale): its result is that runner's, this one is dropped",
-                   counts());
+                   counts_);
     return;
   }
   ++ran_;
   busy_s_ += out->wall_s;
   measure_speed_now();
+  eta_stale_ = true;
   progress_.set_eta(eta());
   std::ostringstream msg;
   msg << describe_task(r.index, r.task_id) << " " << out->status << " in " << format_duration(out->wall_s);
   if (!out->error.empty()) msg << ": " << out->error;
-  progress_.line(msg.str(), counts());
+  count_ended(out->status);
+  progress_.line(msg.str(), counts_);
 }
 
 void Runner::reap(bool stopping) {
@@ -368,11 +409,12 @@ RunSummary Runner::run() {
   Heartbeat heartbeat(store_, token_);  // before the re-queue of dead runners' tasks
   prepare();
   RunSummary s;
-  const Counts start = counts();
+  const Counts start = read_counts();
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh, last_file_check = last_refresh;
+  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh, last_file_check = last_refresh,
+       last_counts = last_refresh;
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal() &&
@@ -397,7 +439,7 @@ RunSummary Runner::run() {
     if (idle || now - last_judged > std::chrono::duration<double>(kRunnerBeatS)) {
       last_judged = now;
       if (int n = requeue_dead_runners(store_, &beats_)) {
-        progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", counts());
+        progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", read_counts());
         requeued = true;
       }
     }
@@ -410,13 +452,18 @@ RunSummary Runner::run() {
       last_refresh = now;
       refill_queue();
       forecast_new_tasks();
-      const Counts c = counts();
+      last_counts = now;
+      const Counts c = read_counts();
       if (queue_.empty() && running_.empty() && (c.running == 0 || superseded_)) break;  // all done or failed
       if (queue_.empty() && running_.empty()) {
         say_holders(holders_said);
         std::this_thread::sleep_for(std::chrono::milliseconds(200));  // another runner holds the rest
         continue;
       }
+    }
+    if (now - last_counts > std::chrono::seconds(2)) {
+      last_counts = now;
+      read_counts();
     }
     progress_.update(counts_, eta());
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -433,7 +480,7 @@ RunSummary Runner::run() {
     stop_all();
   }
   progress_.finish();
-  const Counts c = counts();
+  const Counts c = read_counts();
   record_final_counts(c, s);
   s.ran = ran_;
   s.superseded = superseded_;
