@@ -56,15 +56,32 @@ void require_levels(const ResponseSurface& rs, const std::string& job) {
                               "axis and its error estimate cannot see the curvature it misses");
 }
 
-// phi_diff is phi_peak - phi_cv: with both of them it adds no information, and the
-// misfit would count their residuals twice (a region too small).
+// Targets that read the same stored metric (phi_peak and phi_peak_deg), or a
+// difference beside both its terms (phi_diff with phi_peak and phi_cv, under either
+// name): the misfit would count the same residual twice (a region too small).
 void refuse_redundant(const std::vector<Target>& targets) {
-  auto has = [&](const char* m) {
-    return std::any_of(targets.begin(), targets.end(), [&](const Target& t) { return t.metric == m; });
-  };
-  if (has("phi_diff") && has("phi_peak") && has("phi_cv"))
-    throw JobError("--target", "phi_diff is phi_peak - phi_cv: with targets for both it adds nothing and would count their "
-                               "residuals twice; give two of the three");
+  std::map<std::pair<std::string, std::string>, std::string> reads;  // (plus, minus) -> the target's name
+  for (const auto& t : targets) {
+    MetricSpec s = metric_spec(t.metric);
+    if (s.plus == "phi_diff_deg" && s.minus.empty()) {  // the triaxial scene stores the difference too
+      s.plus = "phi_peak_deg";
+      s.minus = "phi_cv_deg";
+    }
+    const auto [it, fresh] = reads.emplace(std::make_pair(s.plus, s.minus), t.metric);
+    if (fresh) continue;
+    if (it->second == t.metric) throw JobError("--target", "metric \"" + t.metric + "\" given twice");
+    throw JobError("--target", "\"" + it->second + "\" and \"" + t.metric + "\" are the same stored metric (" + s.plus +
+                                   (s.minus.empty() ? "" : " - " + s.minus) +
+                                   "): the misfit would count its residual twice; give it once");
+  }
+  for (const auto& [diff, name] : reads) {
+    if (diff.second.empty()) continue;
+    const auto plus = reads.find({diff.first, ""}), minus = reads.find({diff.second, ""});
+    if (plus != reads.end() && minus != reads.end())
+      throw JobError("--target", name + " is " + plus->second + " - " + minus->second +
+                                     ": with targets for both it adds nothing and would count their residuals twice; "
+                                     "give two of the three");
+  }
 }
 
 // "at theta 40" / "at eta >= 0.3" ...: the part of the job's box without data.
@@ -83,13 +100,20 @@ std::string box_cut(const Box& job, const Box& data) {
 // region (or its best point) lies in: "theta 25, eta 0.3; ..."; "" when none.
 std::string gaps_under(const ResponseSurface& rs, const FitResult& fit) {
   if (rs.thetas.size() < 2 || rs.etas.size() < 2) return "";
-  auto cell = [](const std::vector<double>& axis, double x) {  // index of the cell's lower corner
+  // The index of the cell's lower corner. A point on the searched box's upper edge
+  // lies in the cell below it: the cell above is outside the box (a failed row the fit
+  // was cut short of).
+  auto cell = [](const std::vector<double>& axis, double x, double hi) {
     const auto it = std::upper_bound(axis.begin(), axis.end(), x);
-    return std::clamp(static_cast<int>(it - axis.begin()) - 1, 0, static_cast<int>(axis.size()) - 2);
+    int c = std::clamp(static_cast<int>(it - axis.begin()) - 1, 0, static_cast<int>(axis.size()) - 2);
+    if (c > 0 && axis[static_cast<std::size_t>(c)] >= hi) --c;
+    return c;
   };
   const std::size_t nt = rs.thetas.size();
   std::vector<char> used((nt - 1) * (rs.etas.size() - 1), 0);
-  auto mark = [&](double th, double et) { used[cell(rs.etas, et) * (nt - 1) + cell(rs.thetas, th)] = 1; };
+  auto mark = [&](double th, double et) {
+    used[cell(rs.etas, et, fit.box.eta_hi) * (nt - 1) + cell(rs.thetas, th, fit.box.theta_hi)] = 1;
+  };
   mark(fit.theta, fit.eta);
   const Region& R = fit.region;
   for (int j = 0; j < R.n; ++j)
@@ -135,8 +159,12 @@ std::string job_for_metric(db::Store& store, const std::string& metric, const st
                                      ", or a metric some job stores); jobs searched: " + join(pool));
     throw JobError(metric_flag, "no data: no job stores " + spec.plus + " for " + metric + " (jobs searched: " + join(pool) + ")");
   }
-  if (have.size() > 1)
-    throw JobError("--job", metric + " is stored by several jobs (" + join(have) + "); name the one to use with --job");
+  if (have.size() > 1) {
+    if (jobs_in.empty())
+      throw JobError("--job", metric + " is stored by several jobs (" + join(have) + "); name the one to use with --job");
+    throw JobError("--job", metric + " is stored by more than one of the jobs named (" + join(have) +
+                                "): a fit takes each target from one job; name only one of these");
+  }
   return have.front();
 }
 
@@ -180,9 +208,6 @@ std::string material_mismatch(db::Store& store, const std::vector<std::string>& 
 
 Calibration calibrate(db::Store& store, const FitRequest& req) {
   if (req.targets.empty()) throw JobError("--target", "give at least one target, e.g. --target phi_peak=41.4");
-  std::set<std::string> seen;
-  for (const auto& t : req.targets)
-    if (!seen.insert(t.metric).second) throw JobError("--target", "metric \"" + t.metric + "\" given twice");
   refuse_redundant(req.targets);
   Calibration cal;
   Box box;
@@ -240,6 +265,9 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     for (const auto& m : cal.models) used.insert(m.job);
     if (const std::string w = material_mismatch(store, {used.begin(), used.end()}); !w.empty())
       cal.result.warnings.push_back(w);
+    for (const auto& j : req.jobs)
+      if (!used.count(j))
+        cal.result.warnings.push_back("job " + j + " (--job) stores none of the targets' metrics: the fit does not use it");
   }
   if (cal.result.ok) {
     // One warning per set of gaps: metrics of one job share their failed tasks.
@@ -254,7 +282,9 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
         it->second += " and " + cal.models[k].metric;
     }
     for (const auto& [g, metrics] : gaps)
-      cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics + " have no value at a corner (" + g +
+      cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics +
+                                    (metrics.find(" and ") == std::string::npos ? " has" : " have") +
+                                    " no value at a corner (" + g +
                                     "): the surrogate bridges the gap there; rerun or replace those tasks");
   }
   // The surrogates stand on these results: say when they carry warnings, once a job.

@@ -1,5 +1,7 @@
 #include "inversion.hpp"
 
+#include "chi_square.hpp"
+
 #include "jobs/job_error.hpp"
 
 #include <Eigen/Dense>
@@ -46,12 +48,6 @@ std::pair<std::string, std::string> split_pair(const std::string& text, const st
   static const std::regex ok("[A-Za-z_][A-Za-z0-9_.]*");
   if (!std::regex_match(name, ok)) throw JobError(field, "\"" + name + "\" is not a metric name (in \"" + text + "\")");
   return {name, text.substr(eq + 1)};
-}
-
-// Chi-square upper quantile (Wilson-Hilferty), for the consistency warning.
-double chi2_quantile(int dof, double z) {
-  const double k = dof, a = 2.0 / (9.0 * k);
-  return k * std::pow(1 - a + z * std::sqrt(a), 3);
 }
 
 // The misfit r' C^-1 r of predictions against targets. C_kk = sigma_k^2; for two
@@ -423,7 +419,7 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     // With more targets than unknowns the misfit at the best point is chi-square with
     // K - 2 dof; with two or fewer it is zero wherever the targets are reachable.
     const int dof = static_cast<int>(K) - 2;
-    const double limit = dof >= 1 ? chi2_quantile(dof, 2.326) : INFINITY;
+    const double limit = dof >= 1 ? chi2_upper_quantile(dof, 0.01) : INFINITY;
     if (res.misfit > limit)
       res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) +
                              " at the best point (above the 99% chi-square level " + g(limit, 3) + " for " +

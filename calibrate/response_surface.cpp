@@ -199,7 +199,9 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
       failed += row.r.task.status == "failed";
     }
     const int unfinished = static_cast<int>(rows.size()) - done - failed;
-    throw JobError("--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
+    // Finished tasks without the metric: the metric is not this job's (a repose angle
+    // asked of a triaxial job). None finished: the job has nothing yet.
+    throw JobError(done > 0 ? opt.field : "--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
                                 " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
                                 " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
                                 std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");

@@ -98,16 +98,30 @@ void add_envelope(CLI::App& app, int& exit_code) {
         throw jobs::JobError("--job", "job \"" + job + "\" has no (theta, eta) with finished tasks at two or more "
                                       "confining pressures (" + envs.front().note + ")");
       std::printf("%8s %8s %4s %5s  %18s  %18s  %18s\n", "theta", "eta", "n", "p", "phi (deg)", "c (kPa)", "phi, c=0 (deg)");
+      // Two peaks fix the line exactly: no standard error (NaN), said as n/a.
+      bool unknown_se = false;
+      auto se = [&](double s) {
+        char buf[16];
+        if (std::isfinite(s))
+          std::snprintf(buf, sizeof buf, "%-6.2g", s);
+        else
+          std::snprintf(buf, sizeof buf, "%-6s", "n/a");
+        unknown_se = unknown_se || !std::isfinite(s);
+        return std::string(buf);
+      };
       for (const auto& e : envs) {
         if (!e.note.empty()) {
           std::printf("%8.4g %8.4g %4zu %5s  %s\n", e.theta, e.eta, e.sigma3_kpa.size(), "-", e.note.c_str());
           continue;
         }
-        std::printf("%8.4g %8.4g %4d %5d  %8.3f +- %-6.2g  %8.3g +- %-6.2g  %8.3f +- %-6.2g\n", e.theta, e.eta, e.env.n, e.env.pressures,
-                    e.env.phi_deg, e.env.phi_se, e.env.c, e.env.c_se, e.env.phi0_deg, e.env.phi0_se);
+        std::printf("%8.4g %8.4g %4d %5d  %8.3f +- %s  %8.3g +- %s  %8.3f +- %s\n", e.theta, e.eta, e.env.n, e.env.pressures,
+                    e.env.phi_deg, se(e.env.phi_se).c_str(), e.env.c, se(e.env.c_se).c_str(), e.env.phi0_deg,
+                    se(e.env.phi0_se).c_str());
       }
       std::cout << "n: peaks fitted, p: distinct confining pressures; sigma1 = N sigma3 + 2 c sqrt(N), "
                    "N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak); +- one standard error\n";
+      if (unknown_se)
+        std::cout << "n/a: the line through two peaks fits them exactly and has no standard error; it takes three\n";
       return kOk;
     });
   });

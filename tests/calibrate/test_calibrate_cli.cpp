@@ -267,6 +267,21 @@ TEST(CalibrateCli, FitRefusesWhatCannotGiveAnHonestRegion) {
   r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_cv=28", "--target", "phi_diff=7"}, d2.path.string());
   EXPECT_EQ(r.rc, 2) << r.out;
   EXPECT_NE(r.err.find("--target: phi_diff is phi_peak - phi_cv"), std::string::npos) << r.err;
+  // The same under the stored names, which the fit also takes.
+  r = run_demcal({"fit", "--target", "phi_peak_deg=35", "--target", "phi_cv=28", "--target", "phi_diff=7"},
+                 d2.path.string());
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--target: phi_diff is phi_peak_deg - phi_cv"), std::string::npos) << r.err;
+  r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_cv=28", "--target", "phi_diff_deg=7"},
+                 d2.path.string());
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("phi_diff_deg"), std::string::npos) << r.err;
+  // One metric under two names is one target given twice.
+  r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_peak_deg=35"}, d2.path.string());
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--target: \"phi_peak\" and \"phi_peak_deg\" are the same stored metric (phi_peak_deg)"),
+            std::string::npos)
+      << r.err;
 }
 
 TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
@@ -287,6 +302,14 @@ TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
   EXPECT_NE(r.out.find("warning: job grid has no phi_peak above theta 35"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("at a corner (theta 25, eta 0.3)"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("phi_peak and phi_cv have no value at a corner"), std::string::npos) << r.out;
+  // A region that reaches the cut box's edge (theta 35) stands on no cell beyond it:
+  // the failed theta 40 row is no corner of the cells it lies on.
+  r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(34.5, 0.1)), "--target",
+                  "phi_cv=" + std::to_string(phi_cv_fn(34.5, 0.1))},
+                 d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("theta 35"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("theta 40, eta"), std::string::npos) << r.out;
 }
 
 TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
@@ -311,7 +334,11 @@ TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
   EXPECT_NE(r.err.find("--sigma"), std::string::npos) << r.err;
   r = run_demcal({"fit", "--target", "repose=31"}, dir);  // a known metric nobody stored
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("no data"), std::string::npos) << r.err;
+  // The job's tasks are done and hold no repose angle: the metric is at fault, not a job.
+  EXPECT_NE(r.err.find("error: --target: no data: none of job"), std::string::npos) << r.err;
+  r = run_demcal({"map", "--metric", "repose"}, dir);
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("error: --metric: no data: none of job"), std::string::npos) << r.err;
   r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "other"}, dir);
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--job: no job named \"other\""), std::string::npos) << r.err;
@@ -492,6 +519,43 @@ TEST(CalibrateCli, SigtermWhileGnuplotDrawsStopsItAndLeavesNothingBehind) {
   }
 }
 
+// Several jobs named with --job: each target comes from the one job that stores it.
+TEST(CalibrateCli, JobsNamedForAFitEachGiveTheirOwnMetrics) {
+  TempDir d;
+  {
+    db::Store s(d.file("demcal.db"));
+    store_fake_job(s, "g1", kTh, kEt, 1, 0.0, 1);
+    store_fake_job(s, "g2", kTh, kEt, 1, 0.0, 2);
+    std::vector<FakePoint> all;  // a job whose tasks all failed: it stores no metric
+    for (double th : kTh)
+      for (double et : kEt) all.push_back({th, et});
+    store_fake_job(s, "dead", kTh, kEt, 1, 0.0, 3, all);
+  }
+  const std::string dir = d.path.string();
+  const std::vector<std::string> targets = {"--target", "phi_peak=" + std::to_string(phi_peak_fn(26, 0.2)), "--target",
+                                            "phi_cv=" + std::to_string(phi_cv_fn(26, 0.2))};
+  auto with = [&](std::vector<std::string> jobs) {
+    std::vector<std::string> args = {"fit"};
+    args.insert(args.end(), targets.begin(), targets.end());
+    for (const auto& j : jobs) args.insert(args.end(), {"--job", j});
+    return run_demcal(args, dir);
+  };
+  // Both named jobs store phi_peak: the advice is to name one of them, not "use --job".
+  auto r = with({"g1", "g2"});
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--job: phi_peak is stored by more than one of the jobs named (g1, g2)"), std::string::npos)
+      << r.err;
+  // A named job that gives no target is said, not silently dropped.
+  r = with({"g1", "dead"});
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("warning: job dead (--job) stores none of the targets' metrics: the fit does not use it"),
+            std::string::npos)
+      << r.out;
+  r = with({"g1"});
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(r.out.find("stores none of the targets"), std::string::npos) << r.out;
+}
+
 TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   TempDir d;
   {
@@ -499,11 +563,22 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
     // Same (theta, eta) grid at three pressures, merged into one job.
     for (double p : {50.0, 100.0, 200.0})
       store_fake_job(s, "mc" + std::to_string(static_cast<int>(p)), {20, 30}, {0.1, 0.2}, 1, 0.0, 3, {}, {}, p);
-    std::vector<db::NewTask> all;
+    std::vector<db::NewTask> all, two;
     for (const auto& name : {"mc50", "mc100", "mc200"})
-      for (const auto& t : s.tasks(name)) all.push_back({t.key, t.scene, t.params_json});
+      for (const auto& t : s.tasks(name)) {
+        all.push_back({t.key, t.scene, t.params_json});
+        if (std::string(name) != "mc200") two.push_back(all.back());
+      }
     s.put_job("mc", "{}", all);
+    s.put_job("mc2", "{}", two);
   }
+  // Two peaks a point: the line fits them exactly and has no standard error, said so
+  // (it printed "+- nan").
+  const auto pair = run_demcal({"envelope", "--job", "mc2"}, d.path.string());
+  ASSERT_EQ(pair.rc, 0) << pair.err;
+  EXPECT_EQ(pair.out.find("nan"), std::string::npos) << pair.out;
+  EXPECT_NE(pair.out.find("+- n/a"), std::string::npos) << pair.out;
+  EXPECT_NE(pair.out.find("n/a: the line through two peaks"), std::string::npos) << pair.out;
   const auto r = run_demcal({"envelope", "--job", "mc"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   std::printf("%s", r.out.c_str());
