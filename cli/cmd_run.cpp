@@ -139,7 +139,7 @@ void add_run(CLI::App& app, int& exit_code) {
     if (session.size() < 2) {
       std::cerr << "demcal: error: --mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks "
                    "(mpirun -n 3 demcal run JOB --mpi)\n";
-      exit_code = kRuntime;
+      exit_code = kBadInput;
       return;
     }
     exit_code = guarded(a->job, [&] { return run(*a); });

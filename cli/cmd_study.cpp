@@ -22,6 +22,7 @@ namespace {
 
 struct StudyArgs {
   std::string name, db = "demcal.db", out;
+  bool db_given = false;
   bool quick = false;
   int workers = 0;
   double tolerance = 0.0;
@@ -101,6 +102,10 @@ int study(const StudyArgs& a) {
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  if (a.name == "grazing" && a.tolerance > 0)
+    throw jobs::JobError("--tolerance", "the grazing study has no tolerance: any energy gained is reported");
+  if (a.name == "grazing" && a.db_given)
+    throw jobs::JobError("--db", "the grazing study stores nothing in a database: its CSV and charts go to --out");
   if (is_fidelity(a.name)) {
     for (const auto& r : a.references)
       if (!o.reference.insert(parse_reference(r)).second)
@@ -108,21 +113,23 @@ int study(const StudyArgs& a) {
     calibrate::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
   }
   const std::string flag = a.out.empty() ? "--db" : "--out";
-  require_writable_dir(flag, o.out_dir);  // before the database is written
-  // The folders the study writes into made now, and the database checked, before the
-  // database is made: a file or a link in their way would otherwise stop the study
-  // after it had recorded its jobs.
-  for (const char* sub : {"", "tasks", "jobs"}) {
-    if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
-      continue;
-    jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
-  }
+  // The database checked first (nothing made yet when it is refused), then the
+  // output folder made and locked, then its sub-folders made, all before the database
+  // is: a file or a link in their way would otherwise stop the study after it had
+  // recorded its jobs, and a study refused by the lock leaves nothing of its own.
+  if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
+  require_writable_dir(flag, o.out_dir);
+  jobs::make_folder(o.out_dir, flag, "folder");
   // Held until the study returns: its charts' data and scripts have fixed names.
   const jobs::FolderLock lock(o.out_dir, flag);
   if (!lock.unsupported().empty())
     std::cerr << "demcal: warning: " << flag << ": " << o.out_dir << " cannot be locked (" << lock.unsupported()
               << "): a second study into it at the same time would not be stopped\n";
-  if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
+  for (const char* sub : {"tasks", "jobs"}) {
+    if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
+      continue;
+    jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
+  }
   if (is_fidelity(a.name)) return fidelity(a, o);
   if (a.name == "grazing") {
     const calibrate::GrazingStudy s = calibrate::run_grazing_study(o);
@@ -136,7 +143,11 @@ int study(const StudyArgs& a) {
   db::Store store(a.db);
   const calibrate::TimestepStudy s = calibrate::run_timestep_study(store, o);
   std::cout << "job " << s.job << " in " << a.db << ": " << s.tasks << " tasks (" << s.reused << " reused, " << s.ran
-            << " run now)\n";
+            << " run now";
+  // Failed in an earlier run and kept (the runner retries failures only when asked):
+  // here the factors past the stability limit, which fail by design.
+  if (const int kept = s.tasks - s.reused - s.ran; kept > 0) std::cout << ", " << kept << " failed in an earlier run";
+  std::cout << ")\n";
   std::cout << "series           dt_factor  status    drift/sim-s (worst)  mean +- sd of replicas   wall-s/sim-s  pareto\n";
   for (const auto& p : s.points) {
     char line[240];
@@ -170,8 +181,7 @@ void add_study(CLI::App& app, int& exit_code) {
   cmd->add_option("--tolerance", a->tolerance,
                   "timestep: accepted |relative energy drift| per simulated second (default 0.1); "
                   "fidelity, repose-fidelity: accepted error + replica sd in degrees (default 2)")
-      ->check(kFinite)
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveFinite);
   cmd->add_option("--replicas", a->replicas, "fidelity studies: packings (seeds 1..R) per setting (default 3, --quick 1)")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--knobs", a->knobs,
@@ -182,7 +192,10 @@ void add_study(CLI::App& app, int& exit_code) {
                   "fidelity studies: KNOB=VALUE, the setting errors are measured against (default: the knob's most "
                   "expensive setting); a value not in the knob's list is added to it")
       ->delimiter(',');
-  cmd->callback([a, &exit_code] { exit_code = guarded("", [&] { return study(*a); }); });
+  cmd->callback([a, cmd, &exit_code] {
+    a->db_given = cmd->count("--db") > 0;
+    exit_code = guarded("", [&] { return study(*a); });
+  });
 }
 
 }  // namespace demcal::cli

@@ -115,6 +115,19 @@ const CLI::Validator kFinite(
     },
     "NUMBER", "finite number");
 
+// CLI11's PositiveNumber names its range with DBL_MAX written out in 309 digits.
+const CLI::Validator kPositiveFinite(
+    [](std::string& text) {
+      try {
+        std::size_t used = 0;
+        const double v = std::stod(text, &used);
+        if (used == text.size() && std::isfinite(v) && v > 0) return std::string();
+      } catch (const std::exception&) {
+      }
+      return "must be a positive finite number, got \"" + text + "\"";
+    },
+    "NUMBER > 0", "positive finite number");
+
 std::string default_out_dir(const std::string& db_path) {
   const auto parent = std::filesystem::absolute(db_path).parent_path();
   return (parent / "demcal-out").string();

@@ -37,6 +37,7 @@ extern const CLI::Validator kPlainPath;
 extern const CLI::Validator kDbPath;
 // A finite number: CLI11's ranges let NaN through.
 extern const CLI::Validator kFinite;
+extern const CLI::Validator kPositiveFinite;
 
 // A job's notes (legal but easy to miss) on stderr, one line each.
 void print_notes(const std::string& job_file, const std::vector<std::string>& notes);

@@ -31,7 +31,7 @@ TEST(CliStudy, TimestepQuickWritesChartsRecommendationAndStoresTasks) {
   // ones are kept as failed.
   const Result again = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "charts"}, d.path.string());
   EXPECT_EQ(again.rc, 0) << again.err;
-  EXPECT_NE(again.out.find("reused, 0 run now"), std::string::npos) << again.out;
+  EXPECT_NE(again.out.find("reused, 0 run now, 4 failed in an earlier run)"), std::string::npos) << again.out;
   EXPECT_EQ(slurp(d.file("charts/timestep_recommendation.txt")), first_recommendation);
 }
 
@@ -52,6 +52,7 @@ TEST(CliStudy, ASecondStudyIntoAFolderInUseIsRefused) {
   r = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "charts"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_FALSE(fs::exists(d.file("s.db"))) << "refused before the database was made";
+  EXPECT_FALSE(fs::exists(d.file("charts/tasks"))) << "nothing of its own left in the folder in use";
   ::close(fd);  // released: the study runs
   r = run_demcal({"study", "grazing", "--out", "charts"}, d.path.string());
   EXPECT_EQ(r.rc, 0) << r.err;
@@ -118,6 +119,21 @@ TEST(CliStudy, UnknownStudyIsBadInput) {
   EXPECT_EQ(r.rc, 2);
   r = run_demcal({"study", "timestep", "--tolerance", "-1"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--tolerance: must be a positive finite number, got \"-1\""), std::string::npos) << r.err;
+  EXPECT_LT(r.err.size(), 200u) << r.err;  // CLI11's own range wrote DBL_MAX in full
+  // Options a study does not use are refused, not ignored.
+  r = run_demcal({"study", "grazing", "--quick", "--tolerance", "0.1"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--tolerance: the grazing study has no tolerance"), std::string::npos) << r.err;
+  r = run_demcal({"study", "grazing", "--quick", "--db", "g.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--db: the grazing study stores nothing in a database"), std::string::npos) << r.err;
+  // A database that cannot be made is refused before any folder is.
+  r = run_demcal({"study", "timestep", "--quick", "--db", "nodir/t.db", "--out", "tsq"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("nodir"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "tsq"));
+  EXPECT_FALSE(fs::exists(d.path / "demcal-out"));
 }
 
 // The triaxial fidelity study, quick and restricted to the dt knob: the baseline
