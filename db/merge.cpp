@@ -12,6 +12,7 @@
 #include <functional>
 #include <unistd.h>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
 #include <sys/stat.h>
@@ -20,6 +21,17 @@ namespace demcal::db {
 namespace {
 
 namespace fs = std::filesystem;
+
+// Two job specs (the job files as recorded) that run the same tasks: equal but for
+// the free-text description, which `demcal run` lets a later run of the job rewrite.
+bool same_job(const std::string& a, const std::string& b) {
+  if (a == b) return true;
+  auto ja = nlohmann::json::parse(a, nullptr, false), jb = nlohmann::json::parse(b, nullptr, false);
+  if (!ja.is_object() || !jb.is_object()) return false;
+  ja.erase("description");
+  jb.erase("description");
+  return ja == jb;
+}
 
 int pragma_int(Connection& c, const char* sql) {
   Statement s = c.prepare(sql);
@@ -180,15 +192,19 @@ class Merger {
       Statement f = out_.prepare("SELECT id, spec_json FROM jobs WHERE name = ?");
       f.bind(1, name);
       if (f.step()) {
-        if (f.text(1) != spec)
-          throw DbError(path_ + ": job \"" + name + "\" was run from a different job file (spec) than the job of that name in " +
-                            into_ + "; nothing merged",
+        if (!same_job(f.text(1), spec)) {
+          const auto from = job_from_.find(name);
+          throw DbError(path_ + ": job \"" + name + "\" was run from a different job file (spec) than the job of that name " +
+                            (from != job_from_.end() ? "in " + from->second + ", merged before it" : "in " + into_) +
+                            "; nothing merged",
                         true);
+        }
         jobs_[part_id] = {f.int64(0), name};  // the destination's row stays as it is
       } else {
         out_.prepare("INSERT INTO jobs(name, spec_json, created_at, updated_at) VALUES(?, ?, ?, ?)")
             .bind(1, name).bind(2, spec).bind(3, created).bind(4, updated).run();
         jobs_[part_id] = {out_.last_insert_id(), name};
+        job_from_[name] = path_;
         ++r_.jobs_added;
       }
     }
@@ -328,6 +344,7 @@ class Merger {
   const std::function<bool()>& stop_;
   std::map<std::int64_t, std::pair<std::int64_t, std::string>> jobs_;  // part job id -> destination id, name
   std::map<std::int64_t, std::int64_t> tasks_;                          // part task id -> destination id
+  std::map<std::string, std::string> job_from_;  // job name -> the part that brought it in (not the destination)
 };
 
 }  // namespace

@@ -155,6 +155,18 @@ TEST(Distribute, MergeIsOneTransaction) {
   EXPECT_NE(r.err.find("different job file"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("nothing merged"), std::string::npos) << r.err;
   EXPECT_EQ(dump(d.file("m.db")), before);
+  // Into a new destination, the clash is with the part merged before: named as such
+  // (the destination does not exist yet).
+  const Result fresh = run_demcal({"merge", "part-2.db", "other-spec.db", "--into", "new.db"}, d.path.string());
+  EXPECT_EQ(fresh.rc, 2) << fresh.err;
+  EXPECT_NE(fresh.err.find("than the job of that name in part-2.db, merged before it"), std::string::npos) << fresh.err;
+  EXPECT_FALSE(fs::exists(d.file("new.db")));
+  // A job file whose description alone was edited runs the same tasks, and `demcal run`
+  // takes it as the same job: so does merge.
+  fs::copy_file(d.file("part-3.db"), d.file("described.db"));
+  sql(d.file("described.db"), "UPDATE jobs SET spec_json = json_set(spec_json, '$.description', 'edited')");
+  const Result same = run_demcal({"merge", "part-2.db", "described.db", "--into", "m.db"}, d.path.string());
+  EXPECT_EQ(same.rc, 0) << same.err;
 }
 
 TEST(Distribute, BadShardIsRejected) {
