@@ -278,12 +278,24 @@ std::vector<std::pair<std::string, int>> Store::running_holders(const std::strin
   return out;
 }
 
-int Store::requeue_running(std::int64_t job_id) {
-  conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
-                " error = 're-queued by --requeue-running' WHERE status = 'running'"
-                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
-      .bind(1, job_id).run();
-  return conn_.changes();
+int Store::requeue_running(std::int64_t job_id, const std::function<bool(const std::string&)>& keep) {
+  std::set<std::string> workers;
+  {
+    Statement s = conn_.prepare("SELECT DISTINCT worker FROM tasks WHERE status = 'running'"
+                                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)");
+    s.bind(1, job_id);
+    while (s.step()) workers.insert(s.text(0));
+  }
+  int n = 0;
+  for (const auto& w : workers) {
+    if (keep(w)) continue;
+    conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
+                  " error = 're-queued by --requeue-running' WHERE status = 'running' AND worker IS ?"
+                  " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
+        .bind(1, w).bind(2, job_id).run();
+    n += conn_.changes();
+  }
+  return n;
 }
 
 int Store::reset_failed(std::int64_t job_id) {

@@ -82,7 +82,8 @@ class Store {
   int reset_failed(std::int64_t job_id);
   // The job's running tasks back to pending, whoever holds them (the user says no
   // runner is at work on them). Returns count.
-  int requeue_running(std::int64_t job_id);
+  // The job's running tasks back to pending, but those whose holder `keep` says to leave.
+  int requeue_running(std::int64_t job_id, const std::function<bool(const std::string& worker)>& keep);
   // A runner's heartbeat: `worker` (its token) is alive now. last_seen: when it last
   // beat (unix seconds), nullopt if it never did.
   void beat(const std::string& worker);

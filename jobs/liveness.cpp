@@ -6,8 +6,10 @@
 #include <cmath>
 #include <fstream>
 #include <optional>
+#include <ostream>
 #include <sstream>
 #include <unistd.h>
+#include <vector>
 
 namespace demcal::jobs {
 
@@ -123,6 +125,21 @@ bool holder_alive(db::Store& store, const std::string& token, BeatWatch* watch) 
 
 int requeue_dead_runners(db::Store& store, BeatWatch* watch) {
   return store.requeue_dead([&](const std::string& w) { return holder_alive(store, w, watch); });
+}
+
+int requeue_running_tasks(db::Store& store, std::int64_t job_id, std::ostream& log) {
+  std::vector<std::string> live;
+  const int n = store.requeue_running(job_id, [&](const std::string& w) {
+    const auto t = parse_token(w);
+    const bool alive_here = t && on_this_host(t->host) && (w == runner_token() || process_alive(*t));
+    if (alive_here) live.push_back(w);
+    return alive_here;
+  });
+  if (n > 0) log << "re-queued " << n << " running task(s) (--requeue-running)\n";
+  for (const auto& w : live)
+    log << "--requeue-running: left the tasks of " << w << " running: that runner is alive on this host and would go on "
+        << "running them; stop it first\n";
+  return n;
 }
 
 std::string describe_holder(db::Store& store, const std::string& token, const BeatWatch* watch) {

@@ -3,6 +3,8 @@
 // start time (from /proc) guards against a recycled pid making a dead runner look
 // alive; a zombie counts as dead.
 #include <chrono>
+#include <cstdint>
+#include <iosfwd>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -55,6 +57,10 @@ std::string hostname();      // this machine's name, for tokens, part files and 
 bool holder_alive(db::Store& store, const std::string& token, BeatWatch* watch = nullptr);
 // Running tasks of runners holder_alive finds dead go back to pending; returns how many.
 int requeue_dead_runners(db::Store& store, BeatWatch* watch = nullptr);
+// --requeue-running: the job's running tasks back to pending, whatever their holder's
+// heartbeat says (the user knows a runner elsewhere is gone), except those of a runner
+// alive on this host, which would go on running them: those are named in `log`.
+int requeue_running_tasks(db::Store& store, std::int64_t job_id, std::ostream& log);
 // "node01:30457:... (another host, last seen 42 s ago)": for a run waiting on a holder.
 std::string describe_holder(db::Store& store, const std::string& token, const BeatWatch* watch = nullptr);
 

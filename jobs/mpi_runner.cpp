@@ -180,8 +180,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   const std::string spec = job.spec.dump();  // as record_job stores it
   const std::int64_t job_id = record_job(store, job, options.shard, log);
   Heartbeat heartbeat(store, token);  // before the re-queue of dead runners' tasks
-  if (options.requeue_running)
-    if (int n = store.requeue_running(job_id)) log << "re-queued " << n << " running task(s) (--requeue-running)\n";
+  if (options.requeue_running) requeue_running_tasks(store, job_id, log);
   if (int n = requeue_dead_runners(store))
     log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (options.retry_failed)

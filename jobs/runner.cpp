@@ -119,8 +119,7 @@ void Runner::prepare() {
   if (opt_.shard.active())
     *opt_.log << "shard " << opt_.shard.label() << ": tasks with index k where k mod " << opt_.shard.count
               << " = " << opt_.shard.index - 1 << "\n";
-  if (opt_.requeue_running)
-    if (int n = store_.requeue_running(job_id)) *opt_.log << "re-queued " << n << " running task(s) (--requeue-running)\n";
+  if (opt_.requeue_running) requeue_running_tasks(store_, job_id, *opt_.log);
   if (int n = requeue_dead_runners(store_, &beats_))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (opt_.retry_failed)

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <sstream>
 #include <unistd.h>
 
 namespace demcal::jobs {
@@ -57,8 +58,31 @@ TEST(Liveness, ARunnerOnAnotherHostIsJudgedByItsHeartbeat) {
   EXPECT_NE(describe_holder(s, beating).find("another host, last seen"), std::string::npos);
   EXPECT_NE(describe_holder(s, legacy).find("--requeue-running"), std::string::npos);
   // The user says the legacy runner is gone: the job's running tasks go back.
-  EXPECT_EQ(s.requeue_running(*s.find_job("j")), 2);
+  std::ostringstream log;
+  EXPECT_EQ(requeue_running_tasks(s, *s.find_job("j"), log), 2);
   for (const auto& r : s.tasks("j")) EXPECT_EQ(r.status, "pending");
+  EXPECT_NE(log.str().find("re-queued 2 running task(s) (--requeue-running)"), std::string::npos) << log.str();
+}
+
+// --requeue-running takes the user's word for runners elsewhere, but a runner alive on
+// this host would go on running its tasks beside the new run: those are left, and said.
+TEST(Liveness, RequeueRunningLeavesTheTasksOfARunnerAliveOnThisHost) {
+  demcal::test::TempDir d;
+  db::Store s(d.file("a.db"));
+  s.put_job("j", "{}", three_tasks());
+  const auto rows = s.tasks("j");
+  const std::string here = runner_token();  // this test process: alive, on this host
+  const std::string gone_here = hostname() + ":999999999:1", elsewhere = "node03:9:1";
+  ASSERT_TRUE(s.claim(rows[0].id, here));
+  ASSERT_TRUE(s.claim(rows[1].id, gone_here));
+  ASSERT_TRUE(s.claim(rows[2].id, elsewhere));
+  std::ostringstream log;
+  EXPECT_EQ(requeue_running_tasks(s, *s.find_job("j"), log), 2);
+  EXPECT_EQ(s.task(rows[0].id)->status, "running");
+  EXPECT_EQ(s.task(rows[1].id)->status, "pending");
+  EXPECT_EQ(s.task(rows[2].id)->status, "pending");
+  EXPECT_NE(log.str().find("left the tasks of " + here + " running: that runner is alive on this host"), std::string::npos)
+      << log.str();
 }
 
 TEST(Liveness, AWatchTellsAClockBehindOursFromASilentRunner) {
