@@ -262,6 +262,19 @@ void Runner::count_ended(const std::string& status) {
 
 Counts Runner::read_counts() {
   Counts c;
+  if (opt_.shard.active()) {
+    // This shard's tasks only: a part started as a copy of the main database holds
+    // the whole job (docs/scaling.md).
+    for (const auto& row : store_.tasks(job_.name)) {
+      if (!opt_.shard.contains(static_cast<std::size_t>(row.index))) continue;
+      ++c.total;
+      c.done += row.status == "done";
+      c.failed += row.status == "failed";
+      c.running += row.status == "running";
+    }
+    counts_ = c;
+    return c;
+  }
   for (const auto& [job, by_status] : store_.counts(job_.name))
     for (const auto& [status, n] : by_status) {
       c.total += n;

@@ -40,6 +40,13 @@ TEST(Distribute, ShardsPlusMergeEqualUnshardedRun) {
   const Result again = run_demcal({"run", "j.json", "--shard", "2/3", "--db", "part-2.db"}, d.path.string());
   EXPECT_EQ(again.rc, 0) << again.err;
   EXPECT_NE(again.err.find("2 of 2 task(s) already done"), std::string::npos) << again.err;
+  // A part started as a copy of the main database (docs/scaling.md) holds the whole
+  // job: the shard counts its own tasks, not the job's 7.
+  fs::copy_file(d.file("full.db"), d.file("copy-1.db"));
+  const Result copy = run_demcal({"run", "j.json", "--shard", "1/3", "--db", "copy-1.db"}, d.path.string());
+  EXPECT_EQ(copy.rc, 0) << copy.err;
+  EXPECT_NE(copy.err.find("3 of 3 task(s) already done"), std::string::npos) << copy.err;
+  EXPECT_NE(copy.err.find("3 done (3 reused), 0 failed, 0 unfinished, of 3"), std::string::npos) << copy.err;
 
   const Result m = run_demcal({"merge", "part-1.db", "part-2.db", "part-3.db", "--into", "merged.db"}, d.path.string());
   ASSERT_EQ(m.rc, 0) << m.err;
