@@ -108,7 +108,7 @@ TEST(BadPaths, NonFiniteNumbersInOptionsAreRefused) {
   }
   Result r = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--tolerance", "nan"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("--tolerance: must be a finite number"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--tolerance: must be a positive finite number"), std::string::npos) << r.err;
   r = run_demcal({"run", "j.json", "--db", "ok.db", "--mpi-timeout", "nan"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_FALSE(fs::exists(d.file("s.db")));
