@@ -4,6 +4,7 @@
 #include "db/schema.hpp"
 #include "db/store.hpp"
 #include "jobs/folder_lock.hpp"
+#include "jobs/gnuplot_process.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/runner.hpp"
 #include "calibrate/study.hpp"
@@ -112,6 +113,9 @@ int study(const StudyArgs& a) {
         throw jobs::JobError("--reference", "\"" + r + "\": a second reference for the same knob; give one");
     calibrate::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
   }
+  if (!jobs::gnuplot_on_path())
+    throw std::runtime_error("study " + a.name + " draws its charts with gnuplot, which is not on PATH: install it "
+                             "(apt-get install gnuplot-nox; scripts/setup.sh does) and run the study again; nothing was run");
   const std::string flag = a.out.empty() ? "--db" : "--out";
   // The database checked first (nothing made yet when it is refused), then the
   // output folder made and locked, then its sub-folders made, all before the database

@@ -5,6 +5,7 @@
 #include "progress.hpp"
 #include "stop_signal.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -69,6 +70,19 @@ double gnuplot_time_limit_s() {
   if (*end != '\0' || !std::isfinite(v) || v <= 0)
     throw JobError("DEMCAL_GNUPLOT_TIMEOUT_S", std::string("must be a positive number of seconds, got '") + env + "'");
   return v;
+}
+
+bool gnuplot_on_path() {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "/usr/bin:/bin";  // execlp's default without PATH
+  std::size_t from = 0;
+  while (from <= dirs.size()) {
+    const std::size_t to = std::min(dirs.find(':', from), dirs.size());
+    const std::string dir = to > from ? dirs.substr(from, to - from) : ".";  // an empty entry is the current folder
+    if (::access((dir + "/gnuplot").c_str(), X_OK) == 0) return true;
+    from = to + 1;
+  }
+  return false;
 }
 
 void run_gnuplot_script(const std::string& script) {

@@ -23,6 +23,10 @@ class GnuplotInterrupted : public std::runtime_error {
 // a positive number.
 double gnuplot_time_limit_s();
 
+// Whether an executable gnuplot is on PATH (where run_gnuplot_script's execlp looks):
+// a study checks before it runs its tasks, not after.
+bool gnuplot_on_path();
+
 // Runs gnuplot on a script file, stdin from /dev/null. Throws std::runtime_error when
 // gnuplot is missing, fails or outlives the time limit (then it is killed), and
 // GnuplotInterrupted on SIGINT/SIGTERM.

@@ -134,6 +134,15 @@ TEST(CliStudy, UnknownStudyIsBadInput) {
   EXPECT_NE(r.err.find("nodir"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d.path / "tsq"));
   EXPECT_FALSE(fs::exists(d.path / "demcal-out"));
+  // Without gnuplot a study would run its tasks and fail at its first chart: it says so
+  // before running anything.
+  fs::create_directories(d.path / "empty-bin");
+  r = run_demcal({"study", "timestep", "--quick", "--db", "t.db", "--out", "nognu"}, d.path.string(),
+                 {{"PATH", (d.path / "empty-bin").string()}});
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("draws its charts with gnuplot, which is not on PATH"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.path / "nognu"));
+  EXPECT_FALSE(fs::exists(d.path / "t.db"));
 }
 
 // The triaxial fidelity study, quick and restricted to the dt knob: the baseline
