@@ -7,6 +7,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -208,10 +209,22 @@ double Statement::real_from_text(int col) const {
   const char* begin = t.c_str();
   char* end = nullptr;
   const double v = std::strtod(begin, &end);
-  while (end && *end != '\0' && std::isspace(static_cast<unsigned char>(*end))) ++end;
-  if (!t.empty() && end != begin && end && *end == '\0' && t.size() == std::strlen(begin)) return v;
+  const bool parsed = end != nullptr && end != begin;  // blank text converts nothing, and reads 0
+  while (parsed && *end != '\0' && std::isspace(static_cast<unsigned char>(*end))) ++end;
+  if (parsed && *end == '\0' && t.size() == std::strlen(begin)) return v;
   const char* name = sqlite3_column_name(st_, col);
-  const std::string shown = t.size() > 40 ? t.substr(0, 40) + "..." : t;
+  std::string shown;  // control bytes (a NUL would cut the message) written as \xNN
+  for (std::size_t i = 0; i < t.size() && i < 40; ++i) {
+    const auto c = static_cast<unsigned char>(t[i]);
+    if (c < 0x20 || c == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      shown += hex;
+    } else {
+      shown += t[i];
+    }
+  }
+  if (t.size() > 40) shown += "...";
   throw DbError(conn_->path() + ": column " + (name ? name : "?") + " holds the text \"" + shown +
                     "\" where a number belongs (a damaged or hand-edited database)",
                 true);

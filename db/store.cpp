@@ -241,14 +241,14 @@ void Store::release(std::int64_t task_id, const std::string& worker, const std::
 int Store::requeue_dead(const std::function<bool(const std::string&)>& alive) {
   std::set<std::string> workers;
   {
-    Statement s = conn_.prepare("SELECT DISTINCT worker FROM tasks WHERE status = 'running'");
+    Statement s = conn_.prepare("SELECT DISTINCT coalesce(worker, '') FROM tasks WHERE status = 'running'");
     while (s.step()) workers.insert(s.text(0));
   }
   int n = 0;
   for (const auto& w : workers) {
     if (alive(w)) continue;
     conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
-                  " error = 'runner died; re-queued' WHERE status = 'running' AND worker IS ?")
+                  " error = 'runner died; re-queued' WHERE status = 'running' AND coalesce(worker, '') = ?")
         .bind(1, w).run();
     n += conn_.changes();
   }
@@ -281,7 +281,8 @@ std::vector<std::pair<std::string, int>> Store::running_holders(const std::strin
 int Store::requeue_running(std::int64_t job_id, const std::function<bool(const std::string&)>& keep) {
   std::set<std::string> workers;
   {
-    Statement s = conn_.prepare("SELECT DISTINCT worker FROM tasks WHERE status = 'running'"
+    // coalesce: a running task without a holder (a hand edit) is "" here, and matched below.
+    Statement s = conn_.prepare("SELECT DISTINCT coalesce(worker, '') FROM tasks WHERE status = 'running'"
                                 " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)");
     s.bind(1, job_id);
     while (s.step()) workers.insert(s.text(0));
@@ -290,7 +291,7 @@ int Store::requeue_running(std::int64_t job_id, const std::function<bool(const s
   for (const auto& w : workers) {
     if (keep(w)) continue;
     conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
-                  " error = 're-queued by --requeue-running' WHERE status = 'running' AND worker IS ?"
+                  " error = 're-queued by --requeue-running' WHERE status = 'running' AND coalesce(worker, '') = ?"
                   " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
         .bind(1, w).bind(2, job_id).run();
     n += conn_.changes();

@@ -192,17 +192,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   const int threads = job.threads > 0 ? job.threads : 1;
 
   Progress progress(log, options.terminal);
-  auto counts = [&] {
-    Counts c;
-    for (const auto& [name, by_status] : store.counts(job.name))
-      for (const auto& [status, n] : by_status) {
-        c.total += n;
-        if (status == "done") c.done += n;
-        if (status == "failed") c.failed += n;
-        if (status == "running") c.running += n;
-      }
-    return c;
-  };
+  auto counts = [&] { return job_counts(store, job.name, options.shard); };
   RunSummary s;
   // counts() reads the whole job (~13 ms for 10,000 tasks): once here, then kept
   // up to date by hand, so rank 0's time per task does not grow with the grid.

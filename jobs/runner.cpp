@@ -261,29 +261,8 @@ void Runner::count_ended(const std::string& status) {
 }
 
 Counts Runner::read_counts() {
-  Counts c;
-  if (opt_.shard.active()) {
-    // This shard's tasks only: a part started as a copy of the main database holds
-    // the whole job (docs/scaling.md).
-    for (const auto& row : store_.tasks(job_.name)) {
-      if (!opt_.shard.contains(static_cast<std::size_t>(row.index))) continue;
-      ++c.total;
-      c.done += row.status == "done";
-      c.failed += row.status == "failed";
-      c.running += row.status == "running";
-    }
-    counts_ = c;
-    return c;
-  }
-  for (const auto& [job, by_status] : store_.counts(job_.name))
-    for (const auto& [status, n] : by_status) {
-      c.total += n;
-      if (status == "done") c.done += n;
-      if (status == "failed") c.failed += n;
-      if (status == "running") c.running += n;
-    }
-  counts_ = c;
-  return c;
+  counts_ = job_counts(store_, job_.name, opt_.shard);
+  return counts_;
 }
 
 double Runner::forecast_eta(bool bound) const {
@@ -576,6 +555,28 @@ std::string task_output_dir(const Job& job, const RunOptions& options) {
   if (options.shard.active())
     dir /= "shard-" + std::to_string(options.shard.index) + "-of-" + std::to_string(options.shard.count);
   return dir.string();
+}
+
+Counts job_counts(db::Store& store, const std::string& job, const Shard& shard) {
+  Counts c;
+  if (shard.active()) {
+    for (const auto& row : store.tasks(job)) {
+      if (!shard.contains(static_cast<std::size_t>(row.index))) continue;
+      ++c.total;
+      c.done += row.status == "done";
+      c.failed += row.status == "failed";
+      c.running += row.status == "running";
+    }
+    return c;
+  }
+  for (const auto& [name, by_status] : store.counts(job))
+    for (const auto& [status, n] : by_status) {
+      c.total += n;
+      if (status == "done") c.done += n;
+      if (status == "failed") c.failed += n;
+      if (status == "running") c.running += n;
+    }
+  return c;
 }
 
 void record_final_counts(const Counts& c, RunSummary& s) {

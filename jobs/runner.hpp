@@ -69,6 +69,9 @@ void make_folder(const std::string& dir, const std::string& flag, const std::str
 std::string make_task_output_dir(const Job& job, const RunOptions& options);
 // The job's task counts at the end of a run, into the summary.
 void record_final_counts(const Counts& c, RunSummary& s);
+// The job's task counts from the database; a shard's own tasks only, when `shard` is
+// active (a part started as a copy of the main database holds the whole job).
+Counts job_counts(db::Store& store, const std::string& job, const Shard& shard);
 // "task 7 (#3: dt_factor=0.1)" for progress lines: the task id that query, status and
 // plot take, then the position in the job's grid and its values.
 std::string describe_task(const Job& job, std::size_t index, std::int64_t task_id);

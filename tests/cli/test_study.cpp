@@ -128,6 +128,12 @@ TEST(CliStudy, UnknownStudyIsBadInput) {
   r = run_demcal({"study", "grazing", "--quick", "--db", "g.db"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--db: the grazing study stores nothing in a database"), std::string::npos) << r.err;
+  // Its default output folder comes from --out's default, not from a --db it refuses.
+  write(d.file("demcal-out"), "a file where the folder would go");
+  r = run_demcal({"study", "grazing", "--quick"}, d.path.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("error: --out:"), std::string::npos) << r.err;
+  fs::remove(d.file("demcal-out"));
   // A database that cannot be made is refused before any folder is.
   r = run_demcal({"study", "timestep", "--quick", "--db", "nodir/t.db", "--out", "tsq"}, d.path.string());
   EXPECT_EQ(r.rc, 2);

@@ -243,6 +243,12 @@ TEST(Store, AMetricHeldAsTextReadsAsItsNumberOrNamesTheText) {
   raw_sql(path, "UPDATE metrics SET value = '1,5' WHERE name = 'm'");
   Store s(path);
   expect_bad_input([&] { s.metrics(id); }, "column value holds the text \"1,5\" where a number belongs");
+  // Blank text converts nothing (strtod reads 0 from it); a control byte is shown, not
+  // left to cut the message.
+  raw_sql(path, "UPDATE metrics SET value = ' ' WHERE name = 'm'");
+  expect_bad_input([&] { s.metrics(id); }, "holds the text \" \"");
+  raw_sql(path, "UPDATE metrics SET value = '2.5' || char(9) || 'x' WHERE name = 'm'");
+  expect_bad_input([&] { s.metrics(id); }, "holds the text \"2.5\\x09x\"");
 }
 
 TEST(Store, OverlappingJobsShareTasksByKey) {

@@ -83,6 +83,17 @@ TEST(Liveness, RequeueRunningLeavesTheTasksOfARunnerAliveOnThisHost) {
   EXPECT_EQ(s.task(rows[2].id)->status, "pending");
   EXPECT_NE(log.str().find("left the tasks of " + here + " running: that runner is alive on this host"), std::string::npos)
       << log.str();
+  // A running task without a holder (a hand edit) is nobody's: re-queued too.
+  ASSERT_TRUE(s.claim(rows[1].id, elsewhere));
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(d.file("a.db").c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, ("UPDATE tasks SET worker = NULL WHERE id = " + std::to_string(rows[1].id)).c_str(), nullptr,
+                         nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  EXPECT_EQ(requeue_running_tasks(s, *s.find_job("j"), log), 1);
+  EXPECT_EQ(s.task(rows[1].id)->status, "pending");
+  EXPECT_EQ(s.task(rows[0].id)->status, "running");
 }
 
 TEST(Liveness, AWatchTellsAClockBehindOursFromASilentRunner) {
