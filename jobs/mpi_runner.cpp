@@ -218,10 +218,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
     out.status = "failed";
     out.wall_s = seconds(Clock::now() - k.task_start);
     out.error = why;
-    if (store.finish(k.task->id, token, out)) {
-      --live.running;
-      ++live.failed;
-    }
+    if (store.finish(k.task->id, token, out)) live.ended("failed");
     ++ran;
     progress.line(describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + " failed: " + why, live);
     k.task.reset();
@@ -276,7 +273,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
           const std::string what = describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id);
           if (s.output_failure.empty()) s.output_failure = what + ": " + out->error;
           store.release(k.task->id, token, "could not write its files: " + out->error + "; will be retried");
-          --live.running;
+          live.ended("pending");
           progress.line(what + " could not write its files, back in the queue: " + out->error, live);
           k.task.reset();
           k.ready = true;
@@ -285,10 +282,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
         if (!out) {
           fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
         } else {
-          if (store.finish(k.task->id, token, *out)) {
-            --live.running;
-            ++(out->status == "done" ? live.done : live.failed);
-          }
+          if (store.finish(k.task->id, token, *out)) live.ended(out->status);
           ++ran;
           std::ostringstream msg;
           msg << describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) << " " << out->status << " in "
@@ -398,7 +392,7 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
       Rank& k = ranks[static_cast<std::size_t>(r)];
       if (k.task) {
         store.release(k.task->id, token, "interrupted; will be retried");
-        --live.running;
+        live.ended("pending");
       }
       k.task.reset();
     }

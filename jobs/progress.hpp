@@ -10,6 +10,20 @@ namespace demcal::jobs {
 
 struct Counts {
   int total = 0, done = 0, failed = 0, running = 0;
+  // n more tasks of `status` ("pending", "running", "done", "failed").
+  void add(const std::string& status, int n = 1) {
+    total += n;
+    if (status == "done") done += n;
+    if (status == "failed") failed += n;
+    if (status == "running") running += n;
+  }
+  // A running task ended as `status` ("pending" when it went back to the queue): the
+  // tally a runner keeps between reads of the database.
+  void ended(const std::string& status) {
+    --running;
+    if (status == "done") ++done;
+    if (status == "failed") ++failed;
+  }
 };
 
 // Seconds left (< 0: unknown); at_most: a bound (every task to its time limit), drawn

@@ -66,9 +66,8 @@ class Runner {
   void stop_all();
   // The job's counts read from the database: a GROUP BY over its tasks, ~13 ms at
   // 10,000 tasks, so a run reads them every 2 s and keeps its own tally between
-  // (`count_ended`); other runners' progress shows at the next read.
+  // (`Counts::ended`); other runners' progress shows at the next read.
   Counts read_counts();
-  void count_ended(const std::string& status);
   std::string describe_task(std::size_t index, std::int64_t task_id) const;
   // Says, once per change, which other runners hold the tasks this run waits on.
   void say_holders(std::string& said);
@@ -254,12 +253,6 @@ void Runner::launch(const db::TaskRow& row) {
   progress_.line(describe_task(t.index, row.id) + " started", counts_);
 }
 
-void Runner::count_ended(const std::string& status) {
-  --counts_.running;
-  if (status == "done") ++counts_.done;
-  if (status == "failed") ++counts_.failed;
-}
-
 Counts Runner::read_counts() {
   counts_ = job_counts(store_, job_.name, opt_.shard);
   return counts_;
@@ -337,7 +330,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   std::filesystem::remove(r.result_path, gone);
   if (!out && stopping) {
     store_.release(r.task_id, token_, "interrupted; will be retried");
-    count_ended("pending");
+    counts_.ended("pending");
     progress_.line(describe_task(r.index, r.task_id) + " interrupted, back in the queue", counts_);
     return;
   }
@@ -351,14 +344,14 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
     // Not the task's failure: it goes back to the queue, for the run after the folder is fixed.
     if (output_failure_.empty()) output_failure_ = describe_task(r.index, r.task_id) + ": " + out->error;
     store_.release(r.task_id, token_, "could not write its files: " + out->error + "; will be retried");
-    count_ended("pending");
+    counts_.ended("pending");
     progress_.line(describe_task(r.index, r.task_id) + " could not write its files, back in the queue: " + out->error,
                    counts_);
     return;
   }
   if (!store_.finish(r.task_id, token_, *out)) {
     // This run was judged gone (silent past the lease) and another took the task over.
-    count_ended("running");
+    counts_.ended("running");
     progress_.line(describe_task(r.index, r.task_id) + " " + out->status + " here, but another runner took it over "
                    "meanwhile (this run's heartbeat was judged stale): its result is that runner's, this one is dropped",
                    counts_);
@@ -372,7 +365,7 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
   std::ostringstream msg;
   msg << describe_task(r.index, r.task_id) << " " << out->status << " in " << format_duration(out->wall_s);
   if (!out->error.empty()) msg << ": " << out->error;
-  count_ended(out->status);
+  counts_.ended(out->status);
   progress_.line(msg.str(), counts_);
 }
 
@@ -560,22 +553,12 @@ std::string task_output_dir(const Job& job, const RunOptions& options) {
 Counts job_counts(db::Store& store, const std::string& job, const Shard& shard) {
   Counts c;
   if (shard.active()) {
-    for (const auto& row : store.tasks(job)) {
-      if (!shard.contains(static_cast<std::size_t>(row.index))) continue;
-      ++c.total;
-      c.done += row.status == "done";
-      c.failed += row.status == "failed";
-      c.running += row.status == "running";
-    }
+    for (const auto& row : store.tasks(job))
+      if (shard.contains(static_cast<std::size_t>(row.index))) c.add(row.status);
     return c;
   }
   for (const auto& [name, by_status] : store.counts(job))
-    for (const auto& [status, n] : by_status) {
-      c.total += n;
-      if (status == "done") c.done += n;
-      if (status == "failed") c.failed += n;
-      if (status == "running") c.running += n;
-    }
+    for (const auto& [status, n] : by_status) c.add(status, n);
   return c;
 }
 
