@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <unistd.h>
 
 namespace demcal::cli {
@@ -103,28 +104,30 @@ const CLI::Validator kDbPath(
     },
     "FILE", "database file");
 
+namespace {
+// The whole text as a finite number, else nullopt.
+std::optional<double> finite_number(const std::string& text) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used == text.size() && std::isfinite(v)) return v;
+  } catch (const std::exception&) {
+  }
+  return std::nullopt;
+}
+}  // namespace
+
 const CLI::Validator kFinite(
     [](std::string& text) {
-      try {
-        std::size_t used = 0;
-        const double v = std::stod(text, &used);
-        if (used == text.size() && std::isfinite(v)) return std::string();
-      } catch (const std::exception&) {
-      }
-      return "must be a finite number, got \"" + text + "\"";
+      return finite_number(text) ? std::string() : "must be a finite number, got \"" + text + "\"";
     },
     "NUMBER", "finite number");
 
 // CLI11's PositiveNumber names its range with DBL_MAX written out in 309 digits.
 const CLI::Validator kPositiveFinite(
     [](std::string& text) {
-      try {
-        std::size_t used = 0;
-        const double v = std::stod(text, &used);
-        if (used == text.size() && std::isfinite(v) && v > 0) return std::string();
-      } catch (const std::exception&) {
-      }
-      return "must be a positive finite number, got \"" + text + "\"";
+      const auto v = finite_number(text);
+      return v && *v > 0 ? std::string() : "must be a positive finite number, got \"" + text + "\"";
     },
     "NUMBER > 0", "positive finite number");
 

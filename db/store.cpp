@@ -238,21 +238,33 @@ void Store::release(std::int64_t task_id, const std::string& worker, const std::
       .bind(1, note).bind(2, task_id).bind(3, worker).run();
 }
 
-int Store::requeue_dead(const std::function<bool(const std::string&)>& alive) {
+int Store::requeue_held(std::optional<std::int64_t> job_id, const std::function<bool(const std::string&)>& take,
+                        const char* note) {
+  // A NULL job id binds as NULL: every job's tasks.
+  const char* in_job = " AND (?1 IS NULL OR id IN (SELECT task_id FROM job_tasks WHERE job_id = ?1))";
+  auto bind_job = [&](Statement& s) -> Statement& { return job_id ? s.bind(1, *job_id) : s.bind_null(1); };
   std::set<std::string> workers;
   {
-    Statement s = conn_.prepare("SELECT DISTINCT coalesce(worker, '') FROM tasks WHERE status = 'running'");
+    Statement s = conn_.prepare(
+        (std::string("SELECT DISTINCT coalesce(worker, '') FROM tasks WHERE status = 'running'") + in_job).c_str());
+    bind_job(s);
     while (s.step()) workers.insert(s.text(0));
   }
   int n = 0;
   for (const auto& w : workers) {
-    if (alive(w)) continue;
-    conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
-                  " error = 'runner died; re-queued' WHERE status = 'running' AND coalesce(worker, '') = ?")
-        .bind(1, w).run();
+    if (!take(w)) continue;
+    Statement u = conn_.prepare((std::string("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL, error = ?2"
+                                             " WHERE status = 'running' AND coalesce(worker, '') = ?3") +
+                                 in_job)
+                                    .c_str());
+    bind_job(u).bind(2, std::string(note)).bind(3, w).run();
     n += conn_.changes();
   }
   return n;
+}
+
+int Store::requeue_dead(const std::function<bool(const std::string&)>& alive) {
+  return requeue_held(std::nullopt, [&](const std::string& w) { return !alive(w); }, "runner died; re-queued");
 }
 
 void Store::beat(const std::string& worker) {
@@ -279,24 +291,7 @@ std::vector<std::pair<std::string, int>> Store::running_holders(const std::strin
 }
 
 int Store::requeue_running(std::int64_t job_id, const std::function<bool(const std::string&)>& keep) {
-  std::set<std::string> workers;
-  {
-    // coalesce: a running task without a holder (a hand edit) is "" here, and matched below.
-    Statement s = conn_.prepare("SELECT DISTINCT coalesce(worker, '') FROM tasks WHERE status = 'running'"
-                                " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)");
-    s.bind(1, job_id);
-    while (s.step()) workers.insert(s.text(0));
-  }
-  int n = 0;
-  for (const auto& w : workers) {
-    if (keep(w)) continue;
-    conn_.prepare("UPDATE tasks SET status = 'pending', worker = NULL, pid = NULL,"
-                  " error = 're-queued by --requeue-running' WHERE status = 'running' AND coalesce(worker, '') = ?"
-                  " AND id IN (SELECT task_id FROM job_tasks WHERE job_id = ?)")
-        .bind(1, w).bind(2, job_id).run();
-    n += conn_.changes();
-  }
-  return n;
+  return requeue_held(job_id, [&](const std::string& w) { return !keep(w); }, "re-queued by --requeue-running");
 }
 
 int Store::reset_failed(std::int64_t job_id) {

@@ -80,9 +80,8 @@ class Store {
   // Running tasks whose worker `alive` says is gone go back to pending. Returns count.
   int requeue_dead(const std::function<bool(const std::string& worker)>& alive);
   int reset_failed(std::int64_t job_id);
-  // The job's running tasks back to pending, whoever holds them (the user says no
-  // runner is at work on them). Returns count.
-  // The job's running tasks back to pending, but those whose holder `keep` says to leave.
+  // The job's running tasks back to pending, but those whose holder `keep` says to
+  // leave (the user says no runner is at work on them). Returns count.
   int requeue_running(std::int64_t job_id, const std::function<bool(const std::string& worker)>& keep);
   // A runner's heartbeat: `worker` (its token) is alive now. last_seen: when it last
   // beat (unix seconds), nullopt if it never did.
@@ -116,6 +115,10 @@ class Store {
   std::string file_lost() const;
 
  private:
+  // Running tasks (of one job, or all) whose holder `take` names go back to pending
+  // with `note` as their error. A task without a holder (NULL) is holder "".
+  int requeue_held(std::optional<std::int64_t> job_id, const std::function<bool(const std::string& worker)>& take,
+                   const char* note);
   std::string path_;
   Connection conn_;
   unsigned long long dev_ = 0, ino_ = 0;  // the opened file's identity

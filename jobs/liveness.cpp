@@ -114,10 +114,15 @@ double watch_clock_s() {
 std::string seconds(double s) { return std::to_string(static_cast<long>(std::lround(s))) + " s"; }
 }  // namespace
 
+namespace {
+// A runner on this host: alive by its process (this one, or another still running).
+bool alive_here(const std::string& token, const Token& t) { return token == runner_token() || process_alive(t); }
+}  // namespace
+
 bool holder_alive(db::Store& store, const std::string& token, BeatWatch* watch) {
   const auto t = parse_token(token);
   if (!t) return false;
-  if (on_this_host(t->host)) return token == runner_token() || process_alive(*t);
+  if (on_this_host(t->host)) return alive_here(token, *t);
   const auto seen = store.last_seen(token);
   if (watch) return watch->alive(token, seen, db::unix_now(), watch_clock_s());
   return !seen || db::unix_now() - *seen < kRunnerLeaseS;
@@ -131,9 +136,9 @@ int requeue_running_tasks(db::Store& store, std::int64_t job_id, std::ostream& l
   std::vector<std::string> live;
   const int n = store.requeue_running(job_id, [&](const std::string& w) {
     const auto t = parse_token(w);
-    const bool alive_here = t && on_this_host(t->host) && (w == runner_token() || process_alive(*t));
-    if (alive_here) live.push_back(w);
-    return alive_here;
+    const bool keep = t && on_this_host(t->host) && alive_here(w, *t);
+    if (keep) live.push_back(w);
+    return keep;
   });
   if (n > 0) log << "re-queued " << n << " running task(s) (--requeue-running)\n";
   for (const auto& w : live)
