@@ -12,6 +12,10 @@ void resolve_time_step(nlohmann::json& p, const std::string& section, double def
   if (!p.contains("dt")) p.emplace("dt_factor", p.value("dt_factor", default_factor));
 }
 
+void erase_default(nlohmann::json& p, const std::string& key, const nlohmann::json& value) {
+  if (p.contains(key) && p[key] == value) p.erase(key);
+}
+
 void resolve_diameters(nlohmann::json& p) {
   if (p.contains("grading")) {
     // A sieve chart's points are joined by straight lines in log d unless the job says d.
@@ -45,7 +49,7 @@ void resolve_diameters(nlohmann::json& p) {
   }
   if (p["d_min"].get<double>() > p["d_max"].get<double>())
     throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
-  if (p.contains("size_distribution") && p["size_distribution"] == "uniform") p.erase("size_distribution");
+  erase_default(p, "size_distribution", "uniform");
   if (p.contains("grading"))
     if (const std::string why = material_from(p).grading().problem(); !why.empty())
       throw JobError("material.diameter.grading", why);

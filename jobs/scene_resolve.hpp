@@ -18,6 +18,10 @@ void resolve_time_step(nlohmann::json& params, const std::string& section, doubl
 // the --where matches) of one that leaves it out; a curve must make a grading.
 void resolve_diameters(nlohmann::json& params);
 
+// Drops `key` when it holds `value` (numbers compared by value, 0 == 0.0): a default
+// written out keeps the task key, and the --where matches, of a job that leaves it out.
+void erase_default(nlohmann::json& params, const std::string& key, const nlohmann::json& value);
+
 // Rethrows the engine's ConfigError as a JobError at `job_path` (the job-file
 // spelling of e.field()), keeping only the reason.
 [[noreturn]] void throw_as_job_error(const engine::ConfigError& e, const std::string& job_path);

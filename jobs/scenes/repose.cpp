@@ -214,11 +214,9 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 nlohmann::json key_params(const nlohmann::json& p) {
   const engine::ReposeConfig d;
   nlohmann::json k = p;
-  if (k.contains("side_walls") && k["side_walls"] == engine::to_string(d.side_walls)) k.erase("side_walls");
-  if (k.contains("rest_profile_window") && k["rest_profile_window"].get<double>() == d.rest_profile_window)
-    k.erase("rest_profile_window");
-  if (k.contains("rest_profile_tol_deg") && k["rest_profile_tol_deg"].get<double>() == d.rest_profile_tol_deg)
-    k.erase("rest_profile_tol_deg");
+  erase_default(k, "side_walls", engine::to_string(d.side_walls));
+  erase_default(k, "rest_profile_window", d.rest_profile_window);
+  erase_default(k, "rest_profile_tol_deg", d.rest_profile_tol_deg);
   return k;
 }
 

@@ -179,7 +179,7 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
 // shear_damping written as its default (0, none) is the same work as leaving it out.
 nlohmann::json key_params(const nlohmann::json& p) {
   nlohmann::json k = p;
-  if (k.contains("shear_damping") && k["shear_damping"].get<double>() == 0.0) k.erase("shear_damping");
+  erase_default(k, "shear_damping", 0.0);
   if (!k.contains("density_scale")) return k;
   k["scaled_density"] = k.value("density", engine::Material{}.density) * k["density_scale"].get<double>();
   k.erase("density_scale");
