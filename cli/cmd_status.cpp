@@ -66,14 +66,14 @@ void print_missing(db::Store& store, const db::StatusCounts& counts) {
     for (const auto& [status, n] : by) total += n;
     const auto spec = store.job_spec(name);
     if (!spec) continue;
-    std::size_t expected = 0;
+    std::uint64_t expected = 0;
     try {
-      expected = jobs::parse_job(*spec, "job " + name).tasks.size();
+      expected = jobs::count_tasks(*spec, "job " + name);
     } catch (const std::exception&) {
       continue;  // a spec this demcal cannot expand (older keys): nothing to compare
     }
-    if (expected > static_cast<std::size_t>(total))
-      std::cout << name << ": " << expected - static_cast<std::size_t>(total) << " of the job file's " << expected
+    if (expected > static_cast<std::uint64_t>(total))
+      std::cout << name << ": " << expected - static_cast<std::uint64_t>(total) << " of the job file's " << expected
                 << " task(s) are not in this database (a shard's part, or a merge of some shards): fit and map "
                    "use only what is here\n";
   }
@@ -122,6 +122,7 @@ void add_status(CLI::App& app, int& exit_code) {
     exit_code = guarded("", [&] {
       require_db(*db);
       db::Store store(*db, /*read_only=*/true);
+      const db::ReadSnapshot snapshot = store.snapshot();  // counts, forecast and failures of one moment
       const db::StatusCounts counts = store.counts(*job);
       if (!job->empty() && counts.empty()) {
         std::cerr << "demcal: error: --job: no job named \"" << *job << "\"\n";

@@ -135,7 +135,10 @@ bool Connection::open_read_only(const std::string& path) {
   return false;
 }
 
-Connection::~Connection() { sqlite3_close(db_); }
+Connection::~Connection() {
+  kept_.clear();  // finalized before the close, which would otherwise fail as busy
+  sqlite3_close(db_);
+}
 
 void Connection::exec(const char* sql) {
   char* err = nullptr;
@@ -148,6 +151,15 @@ void Connection::exec(const char* sql) {
 }
 
 Statement Connection::prepare(const char* sql) { return Statement(*this, sql); }
+
+Reused Connection::reuse(const char* sql) {
+  auto& kept = kept_[sql];
+  if (!kept) kept = std::make_unique<Statement>(*this, sql);
+  return Reused(*kept);
+}
+
+Reused::Reused(Statement& s) : s_(s) {}
+Reused::~Reused() { s_.reset(); }
 std::int64_t Connection::last_insert_id() const { return sqlite3_last_insert_rowid(db_); }
 int Connection::changes() const { return sqlite3_changes(db_); }
 
@@ -235,6 +247,9 @@ std::string Statement::text(int col) const {
            : std::string();
 }
 bool Statement::is_null(int col) const { return sqlite3_column_type(st_, col) == SQLITE_NULL; }
+
+ReadSnapshot::ReadSnapshot(Connection& c) : c_(c) { c_.exec("BEGIN DEFERRED"); }
+ReadSnapshot::~ReadSnapshot() { sqlite3_exec(c_.handle(), "COMMIT", nullptr, nullptr, nullptr); }
 
 Transaction::Transaction(Connection& c) : c_(c) { c_.exec("BEGIN IMMEDIATE"); }
 Transaction::~Transaction() {

@@ -2,6 +2,8 @@
 // A thin RAII layer over the SQLite C API. Every value reaches SQL through a bound
 // parameter; SQL text is only ever a literal in this layer.
 #include <cstdint>
+#include <map>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -23,6 +25,7 @@ class DbError : public std::runtime_error {
 };
 
 class Statement;
+class Reused;
 
 // Why SQLite would not read `path` as the file of that name (empty when it would):
 // "" and ":memory:" are databases in memory (every result lost at exit), and a name
@@ -47,6 +50,10 @@ class Connection {
 
   void exec(const char* sql);  // statements without parameters (DDL, PRAGMA, BEGIN)
   Statement prepare(const char* sql);
+  // The statement for `sql`, prepared on first use and kept: for reads run once per
+  // task (a query over 100,000 tasks spent a third of its time preparing them).
+  // One lease per statement at a time.
+  Reused reuse(const char* sql);
   std::int64_t last_insert_id() const;
   int changes() const;
   sqlite3* handle() const { return db_; }
@@ -56,6 +63,7 @@ class Connection {
   bool open_read_only(const std::string& path);
   sqlite3* db_ = nullptr;
   std::string path_;
+  std::map<std::string, std::unique_ptr<Statement>> kept_;
 };
 
 class Statement {
@@ -89,6 +97,37 @@ class Statement {
   double real_from_text(int col) const;
   Connection* conn_;
   sqlite3_stmt* st_ = nullptr;
+};
+
+// A lease on a kept statement: reset when the lease ends, even on an early return,
+// so that it holds no read transaction open (a WAL the writers cannot checkpoint)
+// and no bindings.
+class Reused {
+ public:
+  explicit Reused(Statement& s);
+  ~Reused();
+  Reused(const Reused&) = delete;
+  Reused& operator=(const Reused&) = delete;
+  Statement& operator*() const { return s_; }
+  Statement* operator->() const { return &s_; }
+
+ private:
+  Statement& s_;
+};
+
+// BEGIN ... END around a series of reads: they all see one snapshot (a runner's
+// commit between two of them shows in neither or both), and the WAL's read lock is
+// taken once instead of once per statement (a query over 100,000 tasks spent a fifth
+// of its time in fcntl). No writes inside.
+class ReadSnapshot {
+ public:
+  explicit ReadSnapshot(Connection& c);
+  ~ReadSnapshot();
+  ReadSnapshot(const ReadSnapshot&) = delete;
+  ReadSnapshot& operator=(const ReadSnapshot&) = delete;
+
+ private:
+  Connection& c_;
 };
 
 // BEGIN IMMEDIATE ... COMMIT; rolls back when left by an exception. IMMEDIATE takes

@@ -321,9 +321,9 @@ StatusCounts Store::counts(const std::string& job) {
 
 std::vector<std::pair<std::string, double>> Store::metrics(std::int64_t task_id) {
   std::vector<std::pair<std::string, double>> out;
-  Statement s = conn_.prepare("SELECT name, value FROM metrics WHERE task_id = ? ORDER BY rowid");
-  s.bind(1, task_id);
-  while (s.step()) out.emplace_back(s.text(0), s.real(1));
+  const Reused s = conn_.reuse("SELECT name, value FROM metrics WHERE task_id = ? ORDER BY rowid");
+  s->bind(1, task_id);
+  while (s->step()) out.emplace_back(s->text(0), s->real(1));
   return out;
 }
 
@@ -349,9 +349,9 @@ std::vector<Store::DoneCost> Store::latest_done_costs(const std::string& scene, 
 
 std::vector<std::pair<std::string, std::string>> Store::artifacts(std::int64_t task_id) {
   std::vector<std::pair<std::string, std::string>> out;
-  Statement s = conn_.prepare("SELECT kind, path FROM artifacts WHERE task_id = ? ORDER BY rowid");
-  s.bind(1, task_id);
-  while (s.step()) out.emplace_back(s.text(0), s.text(1));
+  const Reused s = conn_.reuse("SELECT kind, path FROM artifacts WHERE task_id = ? ORDER BY rowid");
+  s->bind(1, task_id);
+  while (s->step()) out.emplace_back(s->text(0), s->text(1));
   return out;
 }
 

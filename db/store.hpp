@@ -109,6 +109,8 @@ class Store {
   std::vector<FitRow> fits();
 
   const std::string& path() const { return path_; }
+  // Reads until the snapshot ends see one state of the file (ReadSnapshot).
+  ReadSnapshot snapshot() { return ReadSnapshot(conn_); }
   // Empty while `path` still names the file this store opened; else what became of
   // it ("deleted", "replaced by another file"). A run whose database file is deleted
   // writes on into the unlinked file and its results vanish with it.

@@ -231,8 +231,9 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
 
 }  // namespace
 
-Job parse_job(const std::string& text, const std::string& source) {
-  const nlohmann::json j = parse_text(text, source);
+namespace {
+// The job's settings read and checked; its tasks not yet expanded.
+Job read_job(const nlohmann::json& j, const std::string& source) {
   if (!j.is_object()) throw JobError("", source + ": the job must be a JSON object, got " + describe(j));
   const SceneDef& scene = scene_of(j);
   check_top_keys(j, scene.name);
@@ -241,8 +242,21 @@ Job parse_job(const std::string& text, const std::string& source) {
   job.spec = j;
   job.scene = scene.name;
   read_settings(j, job);
-  expand_tasks(j, scene, job);
   return job;
+}
+}  // namespace
+
+Job parse_job(const std::string& text, const std::string& source) {
+  const nlohmann::json j = parse_text(text, source);
+  Job job = read_job(j, source);
+  expand_tasks(j, *find_scene(job.scene), job);
+  return job;
+}
+
+std::uint64_t count_tasks(const std::string& text, const std::string& source) {
+  const nlohmann::json j = parse_text(text, source);
+  const Job job = read_job(j, source);
+  return grid_size(read_params(j, *find_scene(job.scene)), job.replicas);
 }
 
 namespace {

@@ -42,5 +42,9 @@ constexpr std::size_t kMaxJobFileBytes = std::size_t{16} << 20;
 // column).
 Job load_job_file(const std::string& path);
 Job parse_job(const std::string& text, const std::string& source);
+// How many tasks the job expands to, read without resolving (or checking) each task:
+// what `status` compares a database's share of a job with. Throws JobError as
+// parse_job does for a file it cannot read at all.
+std::uint64_t count_tasks(const std::string& text, const std::string& source);
 
 }  // namespace demcal::jobs

@@ -107,18 +107,36 @@ void tag_structured(Table& t, const std::vector<ResultRow>& rows, const std::vec
   }
 }
 
+// The parameters of the rows, in the order first seen; only those taking more than
+// one value (absent is a value) when varying_only. Each row's keys are walked beside
+// the first row's, both in key order: one pass, no lookup per key and row.
 std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool varying_only) {
+  static const nlohmann::json none = nlohmann::json::object();
+  const auto object = [](const nlohmann::json& p) -> const nlohmann::json& { return p.is_object() ? p : none; };
+  if (rows.empty()) return {};
+  const nlohmann::json& base = object(rows.front().params);
   std::vector<std::string> keys;
-  for (const auto& r : rows)
-    for (const auto& [k, v] : r.params.items())
-      if (std::find(keys.begin(), keys.end(), k) == keys.end()) keys.push_back(k);
+  for (auto it = base.begin(); it != base.end(); ++it) keys.push_back(it.key());
+  std::set<std::string> varying;
+  for (const auto& r : rows) {
+    const nlohmann::json& p = object(r.params);
+    auto a = base.begin(), b = p.begin();
+    while (a != base.end() || b != p.end()) {
+      if (b == p.end() || (a != base.end() && a.key() < b.key())) {
+        varying.insert((a++).key());
+      } else if (a == base.end() || b.key() < a.key()) {
+        if (std::find(keys.begin(), keys.end(), b.key()) == keys.end()) keys.push_back(b.key());
+        varying.insert((b++).key());
+      } else {
+        if (*a != *b) varying.insert(a.key());
+        ++a, ++b;
+      }
+    }
+  }
   if (!varying_only) return keys;  // one row varies nothing: a table shows none (CSV and JSON all)
   std::vector<std::string> out;
-  for (const auto& k : keys) {
-    std::set<std::string> seen;
-    for (const auto& r : rows) seen.insert(r.params.contains(k) ? r.params[k].dump() : "");
-    if (seen.size() > 1) out.push_back(k);
-  }
+  for (const auto& k : keys)
+    if (varying.count(k)) out.push_back(k);
   return out;
 }
 
@@ -334,9 +352,9 @@ Where parse_where(const std::string& text) {
   return Where{text.substr(0, eq), text.substr(eq + 1)};
 }
 
-std::string task_artifact(db::Store& store, std::int64_t task_id, const std::string& kind) {
+std::string artifact_of(const Artifacts& artifacts, const std::string& kind) {
   std::string found;
-  for (const auto& [k, path] : store.artifacts(task_id))
+  for (const auto& [k, path] : artifacts)
     if (k == kind) found = path;
   return found;
 }
@@ -389,6 +407,7 @@ std::string why_none_match(const std::vector<ResultRow>& all, const std::vector<
 
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where,
                                    std::string* why_none) {
+  const db::ReadSnapshot snapshot = store.snapshot();
   std::vector<ResultRow> all;
   for (auto& t : store.tasks(job)) {
     ResultRow r;
@@ -423,8 +442,9 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
     }
     if (!ok) continue;
     r.metrics = store.metrics(r.task.id);
-    r.hdf5 = task_hdf5(store, r.task.id);
-    r.xdmf = task_artifact(store, r.task.id, "xdmf");
+    const auto artifacts = store.artifacts(r.task.id);
+    r.hdf5 = task_hdf5(artifacts);
+    r.xdmf = artifact_of(artifacts, "xdmf");
     out.push_back(std::move(r));
   }
   if (out.empty() && why_none) *why_none = why_none_match(all, where);

@@ -34,8 +34,10 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
                                    std::string* why_none = nullptr);
 
 // A task's file of one kind ("hdf5", "xdmf") as the database records it, "" when it has none.
-std::string task_artifact(db::Store& store, std::int64_t task_id, const std::string& kind);
-inline std::string task_hdf5(db::Store& store, std::int64_t task_id) { return task_artifact(store, task_id, "hdf5"); }
+using Artifacts = std::vector<std::pair<std::string, std::string>>;  // kind, path (Store::artifacts)
+std::string artifact_of(const Artifacts& artifacts, const std::string& kind);
+inline std::string task_hdf5(const Artifacts& artifacts) { return artifact_of(artifacts, "hdf5"); }
+inline std::string task_hdf5(db::Store& store, std::int64_t task_id) { return task_hdf5(store.artifacts(task_id)); }
 
 enum class Format { table, csv, json };
 Format parse_format(const std::string& text);

@@ -251,6 +251,48 @@ TEST(Store, AMetricHeldAsTextReadsAsItsNumberOrNamesTheText) {
   expect_bad_input([&] { s.metrics(id); }, "holds the text \"2.5\\x09x\"");
 }
 
+// Per-task reads reuse their prepared statement; a kept statement must not hold its
+// read transaction open after the read (the WAL could never be checkpointed while a
+// query or status runs), and a snapshot must show one state of the file throughout.
+TEST(Store, KeptStatementsHoldNothingOpenAndASnapshotSeesOneState) {
+  TempDir d;
+  const std::string path = d.file("a.db");
+  Store s(path);
+  s.put_job("j", "{}", tasks({"k1"}));
+  const std::int64_t id = s.tasks("j")[0].id;
+  ASSERT_TRUE(s.claim(id, "w1"));
+  ASSERT_TRUE(s.finish(id, "w1", done_with(2.0)));
+  ASSERT_EQ(s.metrics(id)[0].second, 2.0);
+  ASSERT_EQ(s.artifacts(id).size(), 1u);
+  raw_sql(path, "UPDATE metrics SET value = 3 WHERE name = 'm'");
+  // TRUNCATE must wait for every reader: it reports busy (1) while one holds a snapshot.
+  const auto checkpoint_busy = [&] {
+    sqlite3* db = nullptr;
+    EXPECT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+    int busy = -1;
+    sqlite3_exec(db, "PRAGMA wal_checkpoint(TRUNCATE)",
+                 [](void* b, int, char** v, char**) { *static_cast<int*>(b) = std::atoi(v[0]); return 0; }, &busy,
+                 nullptr);
+    sqlite3_close(db);
+    return busy;
+  };
+  EXPECT_EQ(checkpoint_busy(), 0);
+  EXPECT_EQ(s.metrics(id)[0].second, 3.0);
+  {
+    const auto snapshot = s.snapshot();
+    EXPECT_EQ(s.metrics(id)[0].second, 3.0);
+    raw_sql(path, "UPDATE metrics SET value = 4 WHERE name = 'm'");
+    EXPECT_EQ(s.metrics(id)[0].second, 3.0);  // the snapshot's state, not the new commit
+    EXPECT_EQ(checkpoint_busy(), 1);
+  }
+  EXPECT_EQ(s.metrics(id)[0].second, 4.0);
+  EXPECT_EQ(checkpoint_busy(), 0);
+  // A read left by an exception, rows unread, holds nothing either.
+  raw_sql(path, "UPDATE metrics SET value = 'x' WHERE name = 'm'");
+  EXPECT_THROW(s.metrics(id), DbError);
+  EXPECT_EQ(checkpoint_busy(), 0);
+}
+
 TEST(Store, OverlappingJobsShareTasksByKey) {
   TempDir d;
   Store s(d.file("a.db"));

@@ -58,6 +58,7 @@ TEST(Grid, CartesianProductTimesReplicas) {
   EXPECT_EQ(keys.size(), job.tasks.size());
   EXPECT_EQ(combos.size(), job.tasks.size());
   for (std::size_t i = 0; i < job.tasks.size(); ++i) EXPECT_EQ(job.tasks[i].index, i);
+  EXPECT_EQ(demcal::jobs::count_tasks(j.dump(), "test.json"), job.tasks.size());  // what status counts, unexpanded
 }
 
 TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
@@ -169,6 +170,7 @@ TEST(Grid, EveryExampleValidates) {
     ++files;
     const Job job = demcal::jobs::load_job_file(entry.path().string());
     EXPECT_GT(job.tasks.size(), 0u) << entry.path();
+    EXPECT_EQ(demcal::jobs::count_tasks(job.spec.dump(), "x"), job.tasks.size()) << entry.path();
   }
   EXPECT_GE(files, 10);
   // The quickstart is a calibration: a (theta, eta) grid that map and fit can use.
