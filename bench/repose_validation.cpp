@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <stdexcept>
 #include <string>
 
 using namespace demcal::engine;
@@ -87,7 +88,13 @@ int main(int argc, char** argv) {
     }
   }
   Progress prog;
-  const ReposeResult r = run_repose(c, &prog);
+  ReposeResult r;
+  try {
+    r = run_repose(c, &prog);
+  } catch (const std::invalid_argument& e) {  // a bad argument (field named), not std::terminate
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 2;
+  }
   std::printf("status %s%s%s\n", to_string(r.outcome.status), r.outcome.failed_stage.empty() ? "" : " in ",
               r.outcome.failed_stage.c_str());
   if (!r.outcome.message.empty()) std::printf("message %s\n", r.outcome.message.c_str());

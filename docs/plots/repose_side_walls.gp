@@ -11,7 +11,7 @@ set datafile separator ','
 set multiplot layout 1,2
 d2r = pi / 180
 # fit of tan(phi) against 1/W over the walled runs and the three periodic ones (1/W = 0)
-tanphi_inf = 0.458; k = 1.52
+tanphi_inf = 0.451; k = 1.573
 set title 'Seed column, theta = 30 deg, eta = 0.1: frictional side walls W apart'
 set xlabel 'wall spacing W [mm]  (d_{mean} = 1.5 mm)'
 set ylabel 'angle of repose (fit 0.2-0.8 H) [deg]'
@@ -20,8 +20,8 @@ set yrange [15:40]
 set key top right box opaque
 set grid
 plot 'docs/plots/data/repose_side_walls_width.csv' using 1:3 with points pt 7 ps 1.5 lc rgb '#1f77b4' title 'frictional walls (per packing)', \
-     atan(tanphi_inf + k / x) / d2r with lines lw 2 lc rgb '#1f77b4' title 'tan phi = 0.458 + 1.52 mm / W', \
-     24.5 with lines dt 2 lw 2 lc rgb '#555555' title 'periodic slab, no walls (3 packings: 24.5 deg)', \
+     atan(tanphi_inf + k / x) / d2r with lines lw 2 lc rgb '#1f77b4' title 'tan phi = 0.451 + 1.57 mm / W', \
+     24.1 with lines dt 2 lw 2 lc rgb '#555555' title 'periodic slab, no walls (3 packings: 24.1 deg)', \
      31.3 with lines dt 3 lw 2 lc rgb '#d62728' title 'seed Fig. 2.15: 31.3 deg'
 set title 'Angle of repose over eta, theta = 30 deg (seed Fig. 2.15)'
 set xlabel 'rolling resistance eta'
