@@ -319,6 +319,16 @@ StatusCounts Store::counts(const std::string& job) {
   return out;
 }
 
+std::vector<std::pair<std::int64_t, std::string>> Store::task_statuses(const std::string& job) {
+  std::vector<std::pair<std::int64_t, std::string>> out;
+  Statement s = conn_.prepare(
+      "SELECT jt.idx, t.status FROM job_tasks jt JOIN jobs j ON j.id = jt.job_id JOIN tasks t ON t.id = jt.task_id "
+      "WHERE j.name = ?");
+  s.bind(1, job);
+  while (s.step()) out.emplace_back(s.int64(0), s.text(1));
+  return out;
+}
+
 std::vector<std::pair<std::string, double>> Store::metrics(std::int64_t task_id) {
   std::vector<std::pair<std::string, double>> out;
   const Reused s = conn_.reuse("SELECT name, value FROM metrics WHERE task_id = ? ORDER BY rowid");

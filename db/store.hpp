@@ -91,6 +91,9 @@ class Store {
   std::vector<std::pair<std::string, int>> running_holders(const std::string& job);
 
   StatusCounts counts(const std::string& job = "");
+  // Each task of `job` as (its index in the job, status), unordered: what a shard's
+  // runner counts its part by, every few seconds, without reading whole rows.
+  std::vector<std::pair<std::int64_t, std::string>> task_statuses(const std::string& job);
   std::vector<std::pair<std::string, double>> metrics(std::int64_t task_id);
   std::vector<std::pair<std::string, std::string>> artifacts(std::int64_t task_id);
   // What the `limit` done tasks of `scene` that finished last and carry a CPU time

@@ -553,8 +553,8 @@ std::string task_output_dir(const Job& job, const RunOptions& options) {
 Counts job_counts(db::Store& store, const std::string& job, const Shard& shard) {
   Counts c;
   if (shard.active()) {
-    for (const auto& row : store.tasks(job))
-      if (shard.contains(static_cast<std::size_t>(row.index))) c.add(row.status);
+    for (const auto& [index, status] : store.task_statuses(job))
+      if (shard.contains(static_cast<std::size_t>(index))) c.add(status);
     return c;
   }
   for (const auto& [name, by_status] : store.counts(job))

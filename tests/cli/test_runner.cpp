@@ -134,7 +134,7 @@ TEST(Runner, SigkillOfRunnerLosesNothingAndResumes) {
 
 TEST(Runner, SigtermStopsRunningTasksForRetry) {
   TempDir d;
-  write(d.file("j.json"), collision_job("term", {0.05, 0.06, 0.07, 0.08}, 150, 6000));
+  write(d.file("j.json"), collision_job("term", {0.05, 0.06, 0.07, 0.08}, 150, 60000));  // long enough that the task seen running is still running at SIGTERM under load
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
   ASSERT_TRUE(one_task_seen_running(db, "term")) << "no task was seen running within 60 s";

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -291,6 +292,27 @@ TEST(Store, KeptStatementsHoldNothingOpenAndASnapshotSeesOneState) {
   raw_sql(path, "UPDATE metrics SET value = 'x' WHERE name = 'm'");
   EXPECT_THROW(s.metrics(id), DbError);
   EXPECT_EQ(checkpoint_busy(), 0);
+}
+
+// A shard's runner counts its part from (index, status) pairs alone.
+TEST(Store, TaskStatusesGiveEachTaskItsIndexInTheJob) {
+  TempDir d;
+  Store s(d.file("a.db"));
+  s.put_job("j", "{}", tasks({"k1", "k2", "k3"}));
+  s.put_job("other", "{}", tasks({"k3"}));
+  const auto rows = s.tasks("j");
+  ASSERT_TRUE(s.claim(rows[1].id, "w1"));
+  ASSERT_TRUE(s.finish(rows[1].id, "w1", done_with(1.0)));
+  auto st = s.task_statuses("j");
+  std::sort(st.begin(), st.end());
+  ASSERT_EQ(st.size(), 3u);
+  EXPECT_EQ(st[0], (std::pair<std::int64_t, std::string>{0, "pending"}));
+  EXPECT_EQ(st[1], (std::pair<std::int64_t, std::string>{1, "done"}));
+  EXPECT_EQ(st[2], (std::pair<std::int64_t, std::string>{2, "pending"}));
+  const auto other = s.task_statuses("other");
+  ASSERT_EQ(other.size(), 1u);
+  EXPECT_EQ(other[0].first, 0);  // its own index in its own job
+  EXPECT_TRUE(s.task_statuses("nope").empty());
 }
 
 TEST(Store, OverlappingJobsShareTasksByKey) {
