@@ -115,7 +115,7 @@ class Reused {
   Statement& s_;
 };
 
-// BEGIN ... END around a series of reads: they all see one snapshot (a runner's
+// BEGIN ... COMMIT around a series of reads: they all see one snapshot (a runner's
 // commit between two of them shows in neither or both), and the WAL's read lock is
 // taken once instead of once per statement (a query over 100,000 tasks spent a fifth
 // of its time in fcntl). No writes inside.
