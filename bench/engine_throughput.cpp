@@ -140,12 +140,12 @@ World prepared_pack(std::size_t n, int threads, bool rolling) {
 
 namespace {
 
+constexpr const char* kUsage =
+    "usage: bench_engine_throughput [N ...] [--steps S] [--threads T ...] [--repeat R]\n"
+    "                               [--rolling yes|no|both]\n";
+
 [[noreturn]] void usage(const std::string& why) {
-  std::fprintf(stderr,
-               "bench_engine_throughput: %s\n"
-               "usage: bench_engine_throughput [N ...] [--steps S] [--threads T ...] [--repeat R]\n"
-               "                               [--rolling yes|no|both]\n",
-               why.c_str());
+  std::fprintf(stderr, "bench_engine_throughput: %s\n%s", why.c_str(), kUsage);
   std::exit(2);
 }
 
@@ -192,7 +192,10 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
-    if (a == "--steps" && has_value) {
+    if (a == "-h" || a == "--help") {
+      std::printf("%s", kUsage);
+      return 0;
+    } else if (a == "--steps" && has_value) {
       steps = positive("--steps", argv[++i]);
     } else if (a == "--threads" && has_value) {
       threads.push_back(static_cast<int>(positive("--threads", argv[++i])));
