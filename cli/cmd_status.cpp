@@ -70,7 +70,7 @@ void print_missing(db::Store& store, const db::StatusCounts& counts) {
     try {
       expected = jobs::count_tasks(*spec, "job " + name);
     } catch (const std::exception&) {
-      continue;  // a spec this demcal cannot expand (older keys): nothing to compare
+      continue;  // a spec whose grid this demcal cannot read (older keys): nothing to compare
     }
     if (expected > static_cast<std::uint64_t>(total))
       std::cout << name << ": " << expected - static_cast<std::uint64_t>(total) << " of the job file's " << expected
