@@ -1,6 +1,7 @@
 #include "inversion.hpp"
 
 #include "chi_square.hpp"
+#include "metric.hpp"
 
 #include "jobs/job_error.hpp"
 
@@ -148,12 +149,17 @@ void apply_sigma(std::vector<Target>& targets, const std::string& text) {
   double s = 0;
   if (!parse_number(value, s) || !(s > 0))
     throw JobError("--sigma", "sigma of " + name + " must be a positive finite number, got \"" + value + "\"");
+  // Matched as --target matches names: phi_peak and phi_peak_deg are one metric.
+  const MetricSpec want = metric_spec(name);
   bool found = false;
-  for (auto& t : targets)
-    if (t.metric == name) {
-      t.sigma = s;
-      found = true;
-    }
+  for (auto& t : targets) {
+    const MetricSpec have = metric_spec(t.metric);
+    if (have.plus != want.plus || have.minus != want.minus) continue;
+    // A second value would silently win over the first.
+    if (!std::isnan(t.sigma)) throw JobError("--sigma", "metric \"" + name + "\" given twice");
+    t.sigma = s;
+    found = true;
+  }
   if (!found) throw JobError("--sigma", "no --target for metric \"" + name + "\"");
 }
 

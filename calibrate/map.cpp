@@ -177,13 +177,17 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
       best << num(o.theta) << " " << num(o.eta) << "\n";
     }
   }
+  // One value everywhere, as gnuplot reads the files: it refuses an empty colour range.
+  const bool flat = zlo <= zhi && num(zlo) == num(zhi);
   // Pass 1: contour lines as tables.
   {
     std::ofstream g(path("tables.gp"));
-    g << "set contour base\nunset surface\nset cntrparam levels auto 10\n"
-      << "set table " << quoted(path("cont.dat")) << "\nsplot " << quoted(path("full.dat")) << " using 1:2:3 with lines\nunset table\n";
+    g << "set contour base\nunset surface\nset cntrparam levels auto 10\n";
+    // A flat surface has no iso-lines; without a range gnuplot warns of an empty one.
+    if (flat) g << "set zrange [" << num(zlo - 1.0) << ":" << num(zlo + 1.0) << "]\n";
+    g << "set table " << quoted(path("cont.dat")) << "\nsplot " << quoted(path("full.dat")) << " using 1:2:3 with lines\nunset table\n";
     if (r.overlay)
-      g << "set cntrparam levels discrete 0.5\nset table " << quoted(path("region.dat")) << "\nsplot " << quoted(path("mask.dat"))
+      g << "set autoscale z\nset cntrparam levels discrete 0.5\nset table " << quoted(path("region.dat")) << "\nsplot " << quoted(path("mask.dat"))
         << " using 1:2:3 with lines\nunset table\n";
   }
   run_gnuplot(path("tables.gp"));
@@ -220,12 +224,18 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
                 rs.with_data(), rs.holes(), s.describe().c_str());
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
     << "set title " << quoted(r.title.empty() ? title : r.title) << " noenhanced font ',10'\n"
-    << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel " << quoted(rs.label) << " noenhanced\n"
+    << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel "
+    << quoted(flat ? rs.label + ": " + num(zlo) + " everywhere" : rs.label) << " noenhanced\n"
     << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
     << "]\nset view map\nset datafile missing 'NaN'\nset palette rgbformulae 33,13,10\n"
     << "set bmargin at screen 0.21\nset key at screen 0.5,0.1 center horizontal maxrows 3\n"
     << "set style textbox opaque noborder\n";
-  if (zhi > zlo) g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";
+  if (flat) {
+    const double pad = std::max(1e-3 * std::abs(zlo), 1e-12);
+    g << "set cbrange [" << num(zlo - pad) << ":" << num(zlo + pad) << "]\n";
+  } else if (zhi > zlo) {
+    g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";
+  }
   int label = 1;
   for (const auto& [level, seg] : longest) {
     if (seg->pts.size() < 4) continue;

@@ -3,11 +3,13 @@
 namespace demcal::jobs {
 
 std::uint64_t grid_size(const ParamSet& set, int replicas) {
-  const std::uint64_t cap = std::uint64_t(1) << 62;
+  const std::uint64_t cap = grid_size_cap;
   std::uint64_t n = static_cast<std::uint64_t>(replicas);
   for (const auto& a : set.axes) {
+    // Tested before multiplying: eight axes of 256 values make exactly 2^64, which
+    // wrapped to 0 and passed the task limit.
+    if (!a.values.empty() && n > cap / a.values.size()) return cap;
     n *= a.values.size();
-    if (n > cap) return cap;
   }
   return n;
 }

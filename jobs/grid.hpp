@@ -8,7 +8,9 @@
 
 namespace demcal::jobs {
 
-// Number of tasks the product gives, saturating instead of overflowing.
+// Number of tasks the product gives, saturating at grid_size_cap instead of
+// overflowing.
+constexpr std::uint64_t grid_size_cap = std::uint64_t(1) << 62;
 std::uint64_t grid_size(const ParamSet& set, int replicas);
 
 // Flat parameters of every task; the last axis varies fastest, replicas innermost.

@@ -8,6 +8,7 @@
 #include <H5Cpp.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -25,7 +26,12 @@ H5::DataSet write_column(H5::Group& g, const std::string& name, const std::vecto
     props.setShuffle();
     props.setDeflate(4);
   }
-  H5::DataSet ds = g.createDataSet(name, H5::PredType::NATIVE_DOUBLE, space, props);
+  // No chunk cache: the chunks go to the file in write(), so that a full disk shows
+  // there, as an exception, and not in the DataSet's destructor, which prints
+  // "H5Dclose failed" on stderr and cannot be caught.
+  H5::DSetAccPropList access;
+  access.setChunkCache(0, 0, 1.0);
+  H5::DataSet ds = g.createDataSet(name, H5::PredType::NATIVE_DOUBLE, space, props, access);
   if (n > 0) ds.write(data.data(), H5::PredType::NATIVE_DOUBLE);
   return ds;
 }
@@ -79,6 +85,16 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
     H5::DataSet ds = write_column(g, c.name, *c.data);
     string_attr(ds, "units", c.units);
   }
+}
+
+// The error for a failed write, judged while its part file is still on disk.
+OutputWriteError write_failed(const std::string& path, const H5::Exception& e) {
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  const bool full = !folder_takes_a_file(dir.empty() ? std::filesystem::path(".") : dir);
+  return OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
+                              (full ? " (the disk is full: the folder takes no further file)"
+                                    : " (is the disk full, or the folder not writable?)"),
+                          full);
 }
 
 }  // namespace
@@ -138,15 +154,13 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     f.flush(H5F_SCOPE_GLOBAL);  // a full disk throws here, with the file still whole to close
   } catch (const H5::Exception& e) {
     if (f_owner) H5Fclose(f_owner.release()->getId());  // once, and without the destructor's line on stderr
-    throw OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
-                             " (is the disk full, or the folder not writable?)");
+    throw write_failed(path, e);
   }
   try {
     f_owner->close();
   } catch (const H5::Exception& e) {
     (void)f_owner.release();  // its destructor would close it a second time
-    throw OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
-                             " (is the disk full, or the folder not writable?)");
+    throw write_failed(path, e);
   }
   file.commit("HDF5 file");
 }

@@ -209,7 +209,8 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
   job.notes = set.notes;
   const std::uint64_t n = grid_size(set, job.replicas);
   if (n > kMaxTasks)
-    throw JobError("grid", "expands to " + std::to_string(n) + " tasks, more than the limit of " + std::to_string(kMaxTasks));
+    throw JobError("grid", "expands to " + std::string(n == grid_size_cap ? "at least " : "") + std::to_string(n) +
+                               " tasks, more than the limit of " + std::to_string(kMaxTasks));
   std::vector<nlohmann::json> params = expand(set, job.replicas, job.seed);
   for (std::size_t i = 0; i < params.size(); ++i) {
     const nlohmann::json given = params[i];

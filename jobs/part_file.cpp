@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <stdexcept>
 #include <unistd.h>
 
@@ -20,6 +21,22 @@ PartFile PartFile::private_to_this_process(std::string path) {
 
 PartFile::~PartFile() {
   if (!done_) std::remove(part_.c_str());
+}
+
+bool folder_takes_a_file(const std::filesystem::path& dir) {
+  const std::string probe = (dir / (".probe-" + std::to_string(::getpid()))).string();
+  bool ok = false;
+  {
+    std::ofstream f(probe, std::ios::binary | std::ios::trunc);
+    const std::string block(64 * 1024, '\0');
+    f << block;
+    f.flush();
+    ok = static_cast<bool>(f);
+    f.close();
+    ok = ok && static_cast<bool>(f);
+  }
+  std::remove(probe.c_str());
+  return ok;
 }
 
 void PartFile::commit(const std::string& what) {

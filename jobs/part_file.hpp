@@ -3,6 +3,7 @@
 // stopped mid-write, a full disk or a failed writer leaves nothing at the final path
 // that looks valid, and an earlier file there stays whole. Task HDF5 files, their
 // Xdmf descriptions and gnuplot's images are written this way.
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 
@@ -11,10 +12,22 @@ namespace demcal::jobs {
 // A file could not be written or moved into place (a full disk, a folder made
 // read-only or removed). For a task's HDF5 file, when the folder takes no file
 // either, every later task would fail the same way after running: the runner stops.
+// `folder_full`: the folder took no further file while the failed write's part was
+// still on disk. Judged then, not after the part is removed: a task's own file can
+// fill the disk and leave room again once deleted, and the next task would fail alike.
 class OutputWriteError : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit OutputWriteError(const std::string& what, bool folder_full = false)
+      : std::runtime_error(what), folder_full_(folder_full) {}
+  bool folder_full() const { return folder_full_; }
+
+ private:
+  bool folder_full_;
 };
+
+// Whether `dir` takes a file of 64 KiB now (a full disk or quota, a read-only or
+// vanished folder does not). The probe file is removed.
+bool folder_takes_a_file(const std::filesystem::path& dir);
 
 class PartFile {
  public:

@@ -104,26 +104,6 @@ std::string task_file_name(std::int64_t task_id, const std::string& task_key) {
   return std::to_string(task_id) + (task_key.empty() ? "" : "-" + task_key.substr(0, 8)) + ".h5";
 }
 
-namespace {
-// Whether `dir` takes a file of 64 KB now (a full disk, a read-only or vanished
-// folder does not).
-bool folder_takes_a_file(const std::filesystem::path& dir) {
-  const std::string probe = (dir / (".probe-" + std::to_string(::getpid()))).string();
-  bool ok = false;
-  {
-    std::ofstream f(probe, std::ios::binary | std::ios::trunc);
-    const std::string block(64 * 1024, '\0');
-    f << block;
-    f.flush();
-    ok = static_cast<bool>(f);
-    f.close();
-    ok = ok && static_cast<bool>(f);
-  }
-  std::remove(probe.c_str());
-  return ok;
-}
-}  // namespace
-
 int run_worker(const WorkerTask& t) {
   test_abort_hook(t.index);
   const auto t0 = std::chrono::steady_clock::now();
@@ -134,10 +114,11 @@ int run_worker(const WorkerTask& t) {
   } catch (const std::exception& e) {
     out = {{"status", "failed"}, {"error", e.what()}, {"metrics", nlohmann::json::array()},
            {"artifacts", nlohmann::json::array()}};
-    // The folder's fault only if it takes no file now: a cause of this task's own (a
-    // folder in the way of its name) fails the task alone.
-    if (dynamic_cast<const OutputWriteError*>(&e))
-      output_written = folder_takes_a_file(std::filesystem::path(t.h5_path).parent_path());
+    // The folder's fault only if it took no file when the write failed, or takes none
+    // now: a cause of this task's own (a folder in the way of its name) fails the
+    // task alone.
+    if (const auto* w = dynamic_cast<const OutputWriteError*>(&e))
+      output_written = !w->folder_full() && folder_takes_a_file(std::filesystem::path(t.h5_path).parent_path());
   }
   out["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string tmp = t.result_path + ".tmp";

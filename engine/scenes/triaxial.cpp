@@ -190,6 +190,7 @@ Metrics TriaxialResult::metrics() const {
                      {"max_dilatancy_deg", max_dilatancy_deg},
                      {"max_inertial_number", max_inertial_number},
                      {"lw_wall_mismatch", lw_wall_mismatch},
+                     {"interior_grains", static_cast<double>(interior_grains)},
                      {"shear_stress_error_mean", shear_stress_error_mean},
                      {"shear_stress_error_max", shear_stress_error_max},
                      {"dt", dt},
@@ -627,6 +628,8 @@ void shear(Rig& rig, TriaxialResult& res) {
     double n_in = 0.0;
     const Mat3 lw = interior_stress(world, rig.interior(), n_in);
     res.porosity_interior_initial = n_in;
+    const Region in = rig.interior();
+    for (const Vec3& x : world.particles().x) res.interior_grains += in.contains(x) ? 1 : 0;
     const double p_walls = rig.mean_stress();
     res.lw_wall_mismatch = std::abs(lw.trace() / 3.0 - p_walls) / p_walls;
   }
@@ -753,6 +756,21 @@ void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   }
 }
 
+// A small sample's interior holds a few grains or none (50 grains: about 2), and its
+// porosity, Love-Weber stress and angles would be stored as if measured.
+void judge_the_interior(const TriaxialConfig& cfg, TriaxialResult& res) {
+  if (res.interior_measured()) return;
+  for (double* v : {&res.phi_peak_interior_deg, &res.phi_cv_interior_deg, &res.porosity_interior_initial,
+                    &res.porosity_interior_final, &res.lw_wall_mismatch})
+    *v = NAN;
+  res.outcome.warnings.push_back("the interior (the box less d_max = " + fmt(cfg.material.d_max) +
+                                 " m from each wall) held " + std::to_string(res.interior_grains) +
+                                 " grains at the start of shear, fewer than " +
+                                 std::to_string(TriaxialResult::kMinInteriorGrains) +
+                                 ": its porosity, Love-Weber stress, angles and coordination are not measured "
+                                 "(more triaxial.particles give it grains)");
+}
+
 void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
   if (res.max_inertial_number > cfg.quasi_static_inertial)
     res.outcome.warnings.push_back("not quasi-static: largest inertial number (strain rate * d_mean * sqrt(rho/p)) " +
@@ -821,6 +839,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
 
   angles_from_series(cfg, res);
   volume_change_from_series(cfg, res);
+  judge_the_interior(cfg, res);
   warn_about_the_regime(cfg, res);
   for (const auto& w : res.outcome.warnings) res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + w;
   finish();

@@ -187,7 +187,7 @@ nlohmann::json key_params(const nlohmann::json& p) {
 }
 
 // Coordination numbers at the start and end of shear, from the series.
-void add_coordination(const engine::Series& s, engine::Metrics& m) {
+void add_coordination(const engine::Series& s, bool interior_measured, engine::Metrics& m) {
   if (s.rows.empty()) return;
   const auto col = [&](const char* name) -> long {
     const auto it = std::find(s.columns.begin(), s.columns.end(), name);
@@ -201,13 +201,16 @@ void add_coordination(const engine::Series& s, engine::Metrics& m) {
   if (z_mech >= 0) m.emplace_back("coordination_mech_final", s.rows.back().at(static_cast<std::size_t>(z_mech)));
   // Over the Love-Weber volume, free of the walls' deficit: the values to compare
   // with the seed's Eq. 2.8.
+  // NaN where the interior held too few grains to measure (the run warns).
   const long z_in = col("z_interior"), z_mech_in = col("z_mech_interior");
+  auto interior = [&](std::size_t row, long c) {
+    return interior_measured ? s.rows.at(row).at(static_cast<std::size_t>(c)) : NAN;
+  };
   if (z_in >= 0) {
-    m.emplace_back("coordination_interior_initial", s.rows.front().at(static_cast<std::size_t>(z_in)));
-    m.emplace_back("coordination_interior_final", s.rows.back().at(static_cast<std::size_t>(z_in)));
+    m.emplace_back("coordination_interior_initial", interior(0, z_in));
+    m.emplace_back("coordination_interior_final", interior(s.rows.size() - 1, z_in));
   }
-  if (z_mech_in >= 0)
-    m.emplace_back("coordination_mech_interior_final", s.rows.back().at(static_cast<std::size_t>(z_mech_in)));
+  if (z_mech_in >= 0) m.emplace_back("coordination_mech_interior_final", interior(s.rows.size() - 1, z_mech_in));
 }
 
 SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
@@ -219,7 +222,7 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   if (r.outcome.ok()) {
     out.metrics = r.metrics();
     out.metrics.emplace_back("phi_diff_deg", r.phi_peak_deg - r.phi_cv_deg);
-    add_coordination(r.series, out.metrics);
+    add_coordination(r.series, r.interior_measured(), out.metrics);
     // No critical-state sample (window too narrow): phi_cv and phi_diff are NaN; leave them out.
     out.metrics.erase(std::remove_if(out.metrics.begin(), out.metrics.end(),
                                      [](const auto& kv) { return std::isnan(kv.second); }),

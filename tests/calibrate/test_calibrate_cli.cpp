@@ -85,6 +85,28 @@ TEST(CalibrateMap, WritesPngAndSvgWithHoles) {
   EXPECT_THROW(calibrate::draw_map(rs, sur, bad), jobs::JobError);
 }
 
+// A metric with one value over the whole grid (a setting stored as a metric, a
+// sample size that does not vary): gnuplot refused the empty colour range, and
+// `map` exited 1 with gnuplot's own error about a script already deleted. It draws
+// the flat map and says the value.
+TEST(CalibrateMap, AMetricWithOneValueEverywhereDrawsAFlatMap) {
+  TempDir d;
+  db::Store s(make_db(d, false));
+  auto rs = calibrate::gather(s, "grid", "phi_peak");
+  for (auto& p : rs.points) {
+    std::fill(p.values.begin(), p.values.end(), 500.0);
+    p.mean = 500.0;
+    p.sd = p.se = 0.0;
+  }
+  rs.pooled_sd = 0.0;
+  const auto sur = calibrate::fit_surrogate(rs);
+  calibrate::MapRequest r;
+  r.out = d.file("flat.svg");
+  ASSERT_NO_THROW(calibrate::draw_map(rs, sur, r));
+  ASSERT_TRUE(fs::exists(r.out));
+  EXPECT_NE(slurp(r.out).find("500 everywhere"), std::string::npos);
+}
+
 TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   TempDir d;
   const std::string db = make_db(d);

@@ -364,6 +364,17 @@ TEST(Inversion, ParsesTargetsAndSigmas) {
   EXPECT_DOUBLE_EQ(ts[0].sigma, 0.5);
   EXPECT_THROW(calibrate::apply_sigma(ts, "phi_cv=0.5"), jobs::JobError);
   EXPECT_THROW(calibrate::apply_sigma(ts, "phi_peak=-1"), jobs::JobError);
+  // Given twice, under either name: refused, not the last value silently kept.
+  try {
+    calibrate::apply_sigma(ts, "phi_peak_deg=2");
+    FAIL() << "a second --sigma for phi_peak was taken";
+  } catch (const jobs::JobError& e) {
+    EXPECT_NE(std::string(e.what()).find("given twice"), std::string::npos) << e.what();
+  }
+  EXPECT_DOUBLE_EQ(ts[0].sigma, 0.5);
+  std::vector<Target> other = {calibrate::parse_target("phi_cv=30")};
+  calibrate::apply_sigma(other, "phi_cv_deg=0.7");  // the stored name of the same metric
+  EXPECT_DOUBLE_EQ(other[0].sigma, 0.7);
 }
 
 }  // namespace

@@ -288,6 +288,37 @@ TEST(TriaxialScene, FrictionlessStepScaleOneStepsAtDtThroughout) {
   EXPECT_NEAR(fast.porosity_initial, same.porosity_initial, 0.01);
 }
 
+// A sample too small for an interior (the box less d_max from each wall) measures
+// nothing there: its porosity, Love-Weber angles and mismatch are NaN with a warning
+// saying why, instead of a porosity of an empty region (50 grains read 0.67) or angles
+// of 0 stored as results. 200 grains hold about 30 interior grains and measure them.
+TEST(TriaxialScene, AnInteriorWithTooFewGrainsIsNotMeasured) {
+  TriaxialConfig c = short_loose(0.004, 0.001);
+  for (const long n : {100L, 200L}) {
+    c.particles = n;
+    const TriaxialResult r = run_triaxial(c);
+    ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+    const bool warned = r.outcome.message.find("grains at the start of shear, fewer than 20") != std::string::npos;
+    if (n == 100) {
+      EXPECT_LT(r.interior_grains, TriaxialResult::kMinInteriorGrains);
+      EXPECT_TRUE(warned) << r.outcome.message;
+      for (double v : {r.porosity_interior_initial, r.porosity_interior_final, r.phi_peak_interior_deg,
+                       r.phi_cv_interior_deg, r.lw_wall_mismatch})
+        EXPECT_TRUE(std::isnan(v)) << v;
+    } else {
+      EXPECT_GE(r.interior_grains, TriaxialResult::kMinInteriorGrains);
+      EXPECT_FALSE(warned) << r.outcome.message;
+      EXPECT_GT(r.porosity_interior_initial, 0.3);
+      EXPECT_LT(r.porosity_interior_initial, 0.5);
+      EXPECT_TRUE(std::isfinite(r.phi_peak_interior_deg));  // measured, however noisy at 200 grains
+    }
+    const Metrics m = r.metrics();
+    const auto grains = std::find_if(m.begin(), m.end(), [](const auto& kv) { return kv.first == "interior_grains"; });
+    ASSERT_NE(grains, m.end());
+    EXPECT_EQ(grains->second, static_cast<double>(r.interior_grains));
+  }
+}
+
 TEST(TriaxialScene, WallAndLoveWeberStressesAgreeInEquilibrium) {
   const TriaxialResult& r = cached("lw");
   ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;

@@ -1,3 +1,5 @@
+#include "jobs/grid.hpp"
+#include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/material_params.hpp"
 #include "jobs/physics_version.hpp"
@@ -59,6 +61,45 @@ TEST(Grid, CartesianProductTimesReplicas) {
   EXPECT_EQ(combos.size(), job.tasks.size());
   for (std::size_t i = 0; i < job.tasks.size(); ++i) EXPECT_EQ(job.tasks[i].index, i);
   EXPECT_EQ(demcal::jobs::count_tasks(j.dump(), "test.json"), job.tasks.size());  // what status counts, unexpanded
+}
+
+// The product saturates instead of wrapping: eight axes of 256 values make exactly
+// 2^64 tasks, which wrapped to 0, passed the task limit, and had the expansion fill
+// memory until the process was killed.
+TEST(Grid, AProductOfTwoToTheSixtyFourIsRefusedNotWrapped) {
+  demcal::jobs::ParamSet set;
+  for (int a = 0; a < 8; ++a) set.axes.push_back({"p" + std::to_string(a), "grid", std::vector<json>(256, json(1.0))});
+  ASSERT_EQ(demcal::jobs::grid_size(set, 1), std::uint64_t(1) << 62);  // else the parse below fills memory
+  set.axes.resize(7);
+  EXPECT_EQ(demcal::jobs::grid_size(set, 1), std::uint64_t(1) << 56);
+  EXPECT_EQ(demcal::jobs::grid_size(set, 256), std::uint64_t(1) << 62);
+
+  json j = base();
+  j["scene"] = "triaxial";
+  j.erase("collision");
+  j["triaxial"] = {{"packing", "dense"}};
+  json grid = json::object();
+  for (const char* name : {"theta_deg", "eta", "b", "kn", "ks", "confining_kpa", "strain_rate", "axial_strain"})
+    grid[name] = json::array();
+  for (int i = 0; i < 256; ++i) {  // all in range: the size alone is wrong
+    grid["theta_deg"].push_back(10 + 0.1 * i);
+    grid["eta"].push_back(0.001 * i);
+    grid["b"].push_back(0.5 + 0.001 * i);
+    grid["kn"].push_back(1e7 + 1e5 * i);
+    grid["ks"].push_back(1e7 + 1e4 * i);
+    grid["confining_kpa"].push_back(50 + i);
+    grid["strain_rate"].push_back(1e-4 + 1e-6 * i);
+    grid["axial_strain"].push_back(0.2 + 0.0003 * i);
+  }
+  j["grid"] = grid;
+  try {
+    parse(j);
+    FAIL() << "a grid of 2^64 tasks was accepted";
+  } catch (const demcal::jobs::JobError& e) {
+    EXPECT_NE(std::string(e.what()).find("expands to at least 4611686018427387904 tasks, more than the limit"),
+              std::string::npos) << e.what();
+  }
+  EXPECT_EQ(demcal::jobs::count_tasks(j.dump(), "test.json"), std::uint64_t(1) << 62);
 }
 
 TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {

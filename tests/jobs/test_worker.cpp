@@ -2,6 +2,7 @@
 // behind is all the parent learns of it.
 #include "../temp_dir.hpp"
 #include "jobs/hdf5_writer.hpp"
+#include "jobs/part_file.hpp"
 #include "jobs/series_plot.hpp"
 #include "jobs/worker.hpp"
 
@@ -14,6 +15,8 @@
 #include <iterator>
 #include <stdexcept>
 #include <csignal>
+#include <sched.h>
+#include <sys/mount.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -130,6 +133,48 @@ TEST(TaskFile, AFullDiskMidWriteIsAnErrorNotACrash) {
     for (const auto& e : std::filesystem::directory_iterator(d.path))
       EXPECT_EQ(e.path().extension(), ".h5") << "limit " << limit << ": left behind: " << e.path();
   }
+}
+
+// A disk that the task's own file fills: once the failed part file is removed there
+// is room again, so a check made after the removal found the folder fine, failed the
+// task (its metrics discarded) and let every later task run and fail alike. The
+// folder is judged while the part is still there. A 512 KiB tmpfs in a mount
+// namespace of a child process; skipped where mounting is not allowed.
+TEST(TaskFile, ADiskFilledByTheTasksOwnFileIsTheFoldersFault) {
+  demcal::test::TempDir d;
+  const std::filesystem::path dir = d.path / "small-disk";
+  std::filesystem::create_directories(dir);
+  const std::string path = (dir / "4-abcdef04.h5").string();
+  const std::string err_file = d.file("stderr.txt");
+  engine::Series s;
+  s.name = "energy";
+  s.columns = {"t", "e"};
+  for (int i = 0; i < 200000; ++i) s.rows.push_back({i * 1e-3, std::sin(i * 0.37)});  // ~3 MB, poorly compressible
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (unshare(CLONE_NEWNS) != 0 || mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
+        mount("tmpfs", dir.c_str(), "tmpfs", 0, "size=512k") != 0)
+      _exit(77);
+    if (!freopen(err_file.c_str(), "w", stderr)) _exit(3);
+    try {
+      write_task_hdf5(path, {"collision", "abcdef0423456789", 4, "done", ""}, {}, {s}, {});
+    } catch (const OutputWriteError& e) {
+      if (!e.folder_full()) _exit(4);
+      if (!folder_takes_a_file(dir)) _exit(6);  // the premise: room again once the part is gone
+      for (const auto& f : std::filesystem::directory_iterator(dir)) _exit(7);  // nothing left behind
+      _exit(0);
+    }
+    _exit(5);
+  }
+  int st = 0;
+  ASSERT_EQ(waitpid(pid, &st, 0), pid);
+  ASSERT_TRUE(WIFEXITED(st)) << "killed by signal " << WTERMSIG(st);
+  if (WEXITSTATUS(st) == 77) GTEST_SKIP() << "cannot mount a tmpfs here (needs CAP_SYS_ADMIN)";
+  EXPECT_EQ(WEXITSTATUS(st), 0) << "4: not judged the folder's fault, 5: no error, 6: no room after the part went, "
+                                   "7: a file left behind";
+  std::ifstream f(err_file);
+  const std::string err((std::istreambuf_iterator<char>(f)), {});
+  EXPECT_EQ(err.find("H5Dclose"), std::string::npos) << "a destructor's line on stderr: " << err;
 }
 
 // A worker that ran its task but cannot write the result (a full disk; here a
