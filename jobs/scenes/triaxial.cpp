@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -248,6 +249,12 @@ std::string advice(const nlohmann::json& p) {
   if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
     os << (os.tellp() > 0 ? "; " : "")
        << "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
+  // The grains then weigh scaled_density whatever the sand's density; tasks that
+  // differ only in it run the same work under different keys.
+  if (c.density_scale <= 0.0 && c.material.density != engine::Material{}.density)
+    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(6) << "material.density (" << c.material.density
+       << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
+       << " kg/m^3); triaxial.density_scale scales material.density instead";
   return os.str();
 }
 

@@ -90,6 +90,25 @@ TEST(TriaxialReposeScenes, FrictionlessStepScaleOnALooseSampleIsNotedUnused) {
   EXPECT_EQ(notes_of(j).find(note), std::string::npos) << notes_of(j);
 }
 
+// With scaled_density (the default) the sand's own density enters nothing: a job
+// that sets it, or a grid over it, runs the same work under different keys. Noted;
+// with density_scale it is used, and not noted.
+TEST(TriaxialReposeScenes, ADensityThatScaledDensityOverridesIsNotedUnused) {
+  const std::string note = "material.density (2600 kg/m^3) is not used: the grains' density is triaxial.scaled_density";
+  auto notes_of = [](const json& j) {
+    std::string all;
+    for (const auto& n : parse(j).notes) all += n + "\n";
+    return all;
+  };
+  json j = triaxial_base();  // density_scale 1e9: the density is used
+  j["material"]["density"] = 2600;
+  EXPECT_EQ(notes_of(j).find("material.density ("), std::string::npos) << notes_of(j);
+  j["triaxial"].erase("density_scale");  // the default scaled_density
+  EXPECT_NE(notes_of(j).find(note), std::string::npos) << notes_of(j);
+  j["material"]["density"] = 2650;  // the default: nothing to say
+  EXPECT_EQ(notes_of(j).find("material.density ("), std::string::npos) << notes_of(j);
+}
+
 TEST(TriaxialReposeScenes, ExamplesValidate) {
   const Job t22 = example("table-2-2.json");
   EXPECT_EQ(t22.scene, "triaxial");
