@@ -186,7 +186,7 @@ void note_advice(const SceneDef& scene, Job& job) {
   }
   for (std::size_t k = 0; k < groups.texts.size(); ++k) {
     const bool one = job.tasks.size() == 1;
-    const std::string who = one ? "the task" : task_list(groups.tasks[k], job.tasks.size());
+    const std::string who = one ? "the task" : task_list(groups.tasks[k], job.tasks.size(), 8, "#");
     job.notes.push_back(who + ": " + groups.texts[k]);
   }
 }

@@ -27,12 +27,15 @@ struct TextGroups {
 };
 
 // "task 3", "tasks 1, 2, 5" or "tasks 1, 2, ... (12)"; "all 9 tasks" when the ids
-// are every one of `of` (0: unknown). At most `shown` ids before the count.
-inline std::string task_list(const std::vector<std::int64_t>& ids, std::size_t of = 0, std::size_t shown = 8) {
+// are every one of `of` (0: unknown). At most `shown` ids before the count. `mark`
+// goes before each id: "#" for indices in the job's grid, which count from 0 (the
+// runner's log writes "task 4 (#3: ...)"), so that they do not read as task ids.
+inline std::string task_list(const std::vector<std::int64_t>& ids, std::size_t of = 0, std::size_t shown = 8,
+                             const char* mark = "") {
   if (of > 1 && ids.size() == of) return "all " + std::to_string(of) + " tasks";
   std::string s = ids.size() > 1 ? "tasks " : "task ";
   const std::size_t listed = ids.size() > shown + 1 ? shown : ids.size();
-  for (std::size_t j = 0; j < listed; ++j) s += (j ? ", " : "") + std::to_string(ids[j]);
+  for (std::size_t j = 0; j < listed; ++j) s += (j ? ", " : "") + std::string(mark) + std::to_string(ids[j]);
   if (listed < ids.size()) s += ", ... (" + std::to_string(ids.size()) + ")";
   return s;
 }

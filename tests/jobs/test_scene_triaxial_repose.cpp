@@ -107,6 +107,10 @@ TEST(TriaxialReposeScenes, ADensityThatScaledDensityOverridesIsNotedUnused) {
   EXPECT_NE(notes_of(j).find(note), std::string::npos) << notes_of(j);
   j["material"]["density"] = 2650;  // the default: nothing to say
   EXPECT_EQ(notes_of(j).find("material.density ("), std::string::npos) << notes_of(j);
+  // A grid over it: the tasks are named by their index in the grid, marked so that
+  // it does not read as a task id (ids count from 1, indices from 0).
+  j["grid"] = {{"theta_deg", {20, 30}}, {"density", {2600, 2650}}};
+  EXPECT_NE(notes_of(j).find("tasks #0, #1: " + note), std::string::npos) << notes_of(j);
 }
 
 TEST(TriaxialReposeScenes, ExamplesValidate) {
@@ -478,7 +482,7 @@ TEST(TriaxialReposeScenes, ANotQuasiStaticShearIsNotedBeforeTheRun) {
   j["grid"] = {{"strain_rate", {1e-4, 5e-4}}};
   notes = inertial_notes(parse(j));
   ASSERT_EQ(notes.size(), 1u);
-  EXPECT_EQ(notes[0].rfind("task 1: inertial number", 0), 0u) << notes[0];
+  EXPECT_EQ(notes[0].rfind("task #1: inertial number", 0), 0u) << notes[0];
 }
 
 class BadTriaxialReposeJob : public ::testing::TestWithParam<Bad> {};
