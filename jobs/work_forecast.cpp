@@ -106,14 +106,19 @@ std::string sig2(double v) {
   os << std::setprecision(2) << v;
   return os.str();
 }
-// 0.5 minutes, 12 minutes, 3.4 hours, 7.3 days: fixed point, never an exponent.
+constexpr double kYear = 365.25 * 86400.0;
+// 0.5 minutes, 12 minutes, 3.4 hours, 7.3 days, 12 years: fixed point; an exponent
+// only past a million years (an absurd but valid setting, whose fixed point had
+// hundreds of digits).
 std::string duration(double seconds) {
   std::ostringstream os;
-  const double minutes = seconds / 60.0, hours = minutes / 60.0;
+  const double minutes = seconds / 60.0, hours = minutes / 60.0, years = seconds / kYear;
   if (minutes < 10.0) os << std::fixed << std::setprecision(1) << minutes << " minutes";
   else if (minutes < 120.0) os << std::fixed << std::setprecision(0) << minutes << " minutes";
   else if (hours < 48.0) os << std::fixed << std::setprecision(hours < 10.0 ? 1 : 0) << hours << " hours";
-  else os << std::fixed << std::setprecision(hours < 240.0 ? 1 : 0) << hours / 24.0 << " days";
+  else if (years < 2.0) os << std::fixed << std::setprecision(hours < 240.0 ? 1 : 0) << hours / 24.0 << " days";
+  else if (years < 1e6) os << std::fixed << std::setprecision(0) << years << " years";
+  else os << std::setprecision(2) << years << " years";
   return os.str();
 }
 std::string approx(double seconds, bool upper_bound = false) {
@@ -144,6 +149,12 @@ std::string describe(const WorkForecast& w, int workers) {
                                : std::string("divide by --workers")) +
                   ") at " + speed_source(w);
   if (!w.left_out.empty()) s += "; " + w.left_out;
+  const double longest = w.task_core_seconds.empty()
+                              ? 0.0
+                              : *std::max_element(w.task_core_seconds.begin(), w.task_core_seconds.end());
+  if (longest > kYear)
+    s += "; a task would run for " + approx(longest, w.upper_bound()) +
+         " of one core: check the settings that set its steps (strain rate, time step, particle count, duration)";
   return s;
 }
 

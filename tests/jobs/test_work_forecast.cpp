@@ -275,4 +275,26 @@ TEST(WorkForecast, LongWorkReadsInDays) {
   EXPECT_NE(jobs::describe(w).find("about 7.3 days of one core"), std::string::npos) << jobs::describe(w);
   w.core_seconds = 30 * 3600.0;
   EXPECT_NE(jobs::describe(w).find("about 30 hours of one core"), std::string::npos) << jobs::describe(w);
+  EXPECT_EQ(jobs::describe(w).find("check the settings"), std::string::npos) << jobs::describe(w);
+}
+
+// An absurd but valid setting (a strain rate of 1e-300 /s) forecast a number of days
+// with hundreds of digits and nothing else: years, an exponent past a million, and
+// a word that a task that long is a setting to check.
+TEST(WorkForecast, AnAbsurdForecastReadsInYearsAndSaysSo) {
+  jobs::WorkForecast w;
+  w.known = true;
+  w.of = "the shear";
+  w.lo = w.hi = w.grain_steps = 7.4e304;
+  const double year = 365.25 * 86400.0;
+  for (const auto& [seconds, text] : std::vector<std::pair<double, std::string>>{
+           {5.3e300, "about 1.7e+293 years of one core"}, {12.4 * year, "about 12 years of one core"}}) {
+    w.core_seconds = seconds;
+    w.task_core_seconds = {seconds};
+    const std::string d = jobs::describe(w);
+    EXPECT_NE(d.find(text), std::string::npos) << d;
+    EXPECT_NE(d.find("a task would run for about"), std::string::npos) << d;
+    EXPECT_NE(d.find("check the settings that set its steps"), std::string::npos) << d;
+    EXPECT_LT(d.size(), 600u) << d;
+  }
 }
