@@ -3,6 +3,7 @@
 #include "chi_square.hpp"
 #include "metric.hpp"
 
+#include "jobs/decimal.hpp"
 #include "jobs/job_error.hpp"
 
 #include <Eigen/Dense>
@@ -33,12 +34,7 @@ std::string percent(double fraction) {
   return b;
 }
 
-bool parse_number(const std::string& s, double& out) {
-  if (s.empty()) return false;
-  char* end = nullptr;
-  out = std::strtod(s.c_str(), &end);
-  return end && *end == '\0' && std::isfinite(out);
-}
+bool parse_number(const std::string& s, double& out) { return jobs::parse_decimal(s, out) && std::isfinite(out); }
 
 std::pair<std::string, std::string> split_pair(const std::string& text, const std::string& field, const char* what) {
   const auto eq = text.find('=');

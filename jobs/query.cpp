@@ -1,5 +1,7 @@
 #include "query.hpp"
 
+#include "decimal.hpp"
+
 #include "job_error.hpp"
 #include "params.hpp"
 #include "scene_registry.hpp"
@@ -20,12 +22,6 @@ bool numbers_equal(double a, double b) {
   return a == b || (std::isfinite(a) && std::isfinite(b) && std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)));
 }
 
-// The whole of `text` as a number, or false.
-bool parse_number(const std::string& text, double& d) {
-  char* end = nullptr;
-  d = std::strtod(text.c_str(), &end);
-  return end && *end == '\0' && end != text.c_str();
-}
 
 nlohmann::json special(const db::TaskRow& t, const std::string& key) {
   if (key == "status") return t.status;
@@ -293,7 +289,7 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
   }
   double d = 0.0;
   if (w.key == "task") {
-    if (!parse_number(w.value, d) || d != std::floor(d) || d < 1)
+    if (!parse_decimal(w.value, d) || d != std::floor(d) || d < 1)
       throw JobError("--where", "task is a task id (a whole number >= 1, as query prints); got \"" + w.value + "\"");
     return;
   }
@@ -307,7 +303,7 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
     if (!v.is_number()) return;
     numeric = true;
   }
-  if (numeric && !parse_number(w.value, d))
+  if (numeric && !parse_decimal(w.value, d))
     throw JobError("--where", w.key + " is a number in every task; got \"" + w.value + "\"");
   // A stored parameter is always finite: inf would match everything (|a - inf| <=
   // 1e-12 inf) and nan nothing.
@@ -339,7 +335,7 @@ bool value_matches(const nlohmann::json& v, const std::string& want) {
   if (v.is_boolean()) return want == (v.get<bool>() ? "true" : "false");
   if (v.is_string()) return v.get<std::string>() == want;
   double d = 0.0;
-  if (v.is_number()) return parse_number(want, d) && numbers_equal(v.get<double>(), d);
+  if (v.is_number()) return parse_decimal(want, d) && numbers_equal(v.get<double>(), d);
   const nlohmann::json w = nlohmann::json::parse(want, nullptr, false);
   return !w.is_discarded() && same_structure(v, w);
 }

@@ -359,6 +359,8 @@ TEST(Inversion, ParsesTargetsAndSigmas) {
   EXPECT_THROW(calibrate::parse_target("phi_peak=abc"), jobs::JobError);
   EXPECT_THROW(calibrate::parse_target("=3"), jobs::JobError);
   EXPECT_THROW(calibrate::parse_target("phi peak=3"), jobs::JobError);
+  EXPECT_THROW(calibrate::parse_target("phi_peak=0x29"), jobs::JobError);  // not hexadecimal
+  EXPECT_THROW(calibrate::parse_target("phi_peak= 41"), jobs::JobError);
   std::vector<Target> ts = {t};
   calibrate::apply_sigma(ts, "phi_peak=0.5");
   EXPECT_DOUBLE_EQ(ts[0].sigma, 0.5);

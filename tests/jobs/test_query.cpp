@@ -1,4 +1,5 @@
 // query's metric columns: the names a user types, read against what tasks store.
+#include "jobs/decimal.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/query.hpp"
 
@@ -42,4 +43,18 @@ TEST(Query, TheNamesMapAndFitTakeReadTheStoredAngles) {
   } catch (const JobError& e) {
     EXPECT_NE(std::string(e.what()).find("no task stores a metric \"phi_peek\""), std::string::npos) << e.what();
   }
+}
+
+// --where values are read as a user types numbers: " 30" matched where "30 " did not
+// (strtod skips leading spaces only), and "0x1e" matched 30 (strtod reads hex).
+TEST(Query, AWhereNumberIsDecimalWithNothingAround) {
+  using demcal::jobs::value_matches;
+  const nlohmann::json thirty = 30.0;
+  for (const char* yes : {"30", "30.0", "3e1", "+30"}) EXPECT_TRUE(value_matches(thirty, yes)) << yes;
+  for (const char* no : {" 30", "30 ", "0x1e", "0X1E", "30abc", ""}) EXPECT_FALSE(value_matches(thirty, no)) << no;
+  double d = 0;
+  EXPECT_TRUE(demcal::jobs::parse_decimal("-1.5e-3", d));
+  EXPECT_EQ(d, -1.5e-3);
+  EXPECT_TRUE(demcal::jobs::parse_decimal("inf", d));
+  EXPECT_FALSE(demcal::jobs::parse_decimal("0x10", d));
 }
