@@ -501,6 +501,10 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
     else
       log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()
           << kept << ". Give the job another name to keep both\n";
+  } else if (earlier && *earlier != spec) {
+    // A grown grid, or an edit that moved no task: the job is the new spec all the same.
+    log << "job " << job.name << ": its spec differs from the last run's in this database; every task of the last "
+        << "run is still part of it (its results are kept), and the job is now this spec\n";
   }
   return id;
 }

@@ -568,6 +568,16 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
                        "longer part of it"),
             std::string::npos)
       << r.err;
+  // Grown: no task leaves the job, and the run still says the spec is another one.
+  write(d.file("c.json"), collision_job("small", {0.05, 0.2, 0.3}));
+  const Result grown = run_demcal({"run", "c.json"}, d.path.string());
+  ASSERT_EQ(grown.rc, 0) << grown.err;
+  EXPECT_NE(grown.err.find("its spec differs from the last run's in this database; every task of the last run is "
+                           "still part of it"),
+            std::string::npos)
+      << grown.err;
+  const Result same = run_demcal({"run", "c.json"}, d.path.string());
+  EXPECT_EQ(same.err.find("spec differs"), std::string::npos) << same.err;
 }
 
 // The same job file after an upgrade that changed a scene's physics (every key moves):
