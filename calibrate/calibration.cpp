@@ -141,11 +141,14 @@ std::string gaps_under(const ResponseSurface& rs, const FitResult& fit) {
 std::string job_for_metric(db::Store& store, const std::string& metric, const std::vector<std::string>& jobs_in,
                            const std::vector<jobs::Where>& where, const std::string& metric_flag) {
   (void)where;
-  for (const auto& j : jobs_in)
+  for (const auto& j : jobs_in) {
+    // Else "stored by more than one of the jobs named (grid, grid)".
+    if (std::count(jobs_in.begin(), jobs_in.end(), j) > 1) throw JobError("--job", "\"" + j + "\" given twice");
     if (!store.find_job(j)) {
       const auto all = base_jobs(store);
       throw JobError("--job", "no job named \"" + j + "\"" + (all.empty() ? " (the database holds no jobs)" : " (jobs: " + join(all) + ")"));
     }
+  }
   const std::vector<std::string> pool = jobs_in.empty() ? base_jobs(store) : jobs_in;
   if (pool.empty()) throw JobError("--job", "no data: the database holds no jobs");
   if (pool.size() == 1) return pool.front();

@@ -424,6 +424,9 @@ TEST(CalibrateCli, ImpossibleTargetsAndPinnedAxesAreRefusedAndNothingIsStored) {
       {{"map", "--metric", "phi_peak", "--where", "eta=0.1"}, "--where: eta is an axis"},
       {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak"}, "(e.g. phi_peak=1.0)"},
       {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak=inf"}, "must be a positive finite number, got \"inf\""},
+      {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak=1", "--sigma", "phi_peak=2"},
+       "--sigma: metric \"phi_peak\" given twice"},
+      {{"fit", "--target", "phi_peak=40", "--job", "grid", "--job", "grid"}, "--job: \"grid\" given twice"},
   };
   for (const auto& [args, why] : refused) {
     const auto r = run_demcal(args, dir);
