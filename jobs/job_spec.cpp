@@ -195,9 +195,15 @@ void note_advice(const SceneDef& scene, Job& job) {
 // value in the list that this task took ("grid.grading[1]"), not at the section's key.
 std::string axis_value_path(const SceneDef& scene, const ParamSet& set, const std::string& path,
                             const nlohmann::json& given) {
+  // The error's path is the parameter's, or its parent's for a check of two fields
+  // ("material.diameter: min must not exceed max" on a grid over d_min).
+  auto names = [&](const ParamSpec& spec) {
+    const std::string p = spec.path();
+    return p == path || (p.size() > path.size() && p.compare(0, path.size(), path) == 0 && p[path.size()] == '.');
+  };
   for (const auto& a : set.axes)
     for (const auto& spec : scene.params)
-      if (spec.name == a.name && spec.path() == path && given.contains(a.name))
+      if (spec.name == a.name && names(spec) && given.contains(a.name))
         for (std::size_t k = 0; k < a.values.size(); ++k)
           if (a.values[k] == given[a.name]) return a.path + "[" + std::to_string(k) + "]";
   return path;

@@ -97,6 +97,8 @@ const std::vector<Bad>& cases() {
       {"scene_key_in_material", [](json& j) { j["material"]["particles"] = 30; },
        "material.particles: belongs in the \"collision\" section"},
       {"grid_bad_value", [](json& j) { j["grid"]["eta"] = {-1}; }, "grid.eta[0]"},
+      // A check of two fields (min below max) is blamed on the grid value it failed on.
+      {"grid_d_min_over_max", [](json& j) { j["grid"]["d_min"] = {0.0005, 0.003}; }, "grid.d_min[1]"},
       {"replicas_zero", [](json& j) { j["replicas"] = 0; }, "replicas"},
       {"replicas_string", [](json& j) { j["replicas"] = "2"; }, "replicas"},
       {"seed_negative", [](json& j) { j["seed"] = -1; }, "seed"},
