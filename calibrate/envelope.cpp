@@ -56,6 +56,11 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
 
 std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where) {
   if (!store.find_job(job)) throw jobs::JobError("--job", "no job named \"" + job + "\"");
+  // Pinned, it would leave one pressure and read "needs at least two".
+  for (const auto& w : where)
+    if (w.key == "confining_kpa")
+      throw jobs::JobError("--where", "confining_kpa is the envelope's axis: it is fitted across the confining "
+                                      "pressures, so it cannot be pinned");
   const auto rows = jobs::select_rows(store, job, where);
   if (rows.empty()) throw jobs::JobError("--where", "no task of job \"" + job + "\" matches the filters");
   // The wrong kind of job is the first thing to say, before asking to pin a parameter.

@@ -630,6 +630,10 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   const auto none = run_demcal({"envelope", "--job", "mc", "--where", "theta_deg=99"}, d.path.string());
   EXPECT_EQ(none.rc, 2);
   EXPECT_NE(none.err.find("--where: no task of job \"mc\" matches"), std::string::npos) << none.err;
+  // The envelope's own axis pinned: said so, not "needs two confining pressures".
+  const auto axis = run_demcal({"envelope", "--job", "mc", "--where", "confining_kpa=100"}, d.path.string());
+  EXPECT_EQ(axis.rc, 2);
+  EXPECT_NE(axis.err.find("--where: confining_kpa is the envelope's axis"), std::string::npos) << axis.err;
 }
 
 TEST(CalibrateRefine, RoundsConvergeOnTheTruthAndAreRecorded) {
