@@ -676,6 +676,15 @@ void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapRe
   res.repose_deg = fit.angle_deg;
   res.repose_fit_err_deg = fit.angle_err_deg;
   res.fit_points = fit.points;
+  // A heap a few grains across has a line through it, not a slope: a 6 mm column of
+  // 34 grains read 12.3 +- 9.3 deg over 4 bins, with nothing said.
+  if (fit.points < ReposeResult::kMinSlopeBins) {
+    std::ostringstream os;
+    os << "the slope is fitted over " << fit.points << " profile bins, fewer than " << ReposeResult::kMinSlopeBins
+       << " (angle error " << fit.angle_err_deg << " deg): the heap is too small for its angle to be a measurement "
+       << "(a larger repose.column_width and column_height give it more)";
+    res.outcome.warnings.push_back(os.str());
+  }
   res.repose_upper_deg = fit.upper_angle_deg;
   res.repose_lower_deg = fit.lower_angle_deg;
   res.fit_slope = fit.slope;

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -401,6 +403,23 @@ TEST(ReposeScene, AHeapStillFlowingIsNotJudgedAtRestByItsProfile) {
   EXPECT_NE(r.outcome.message.find("the heap's angle moved by"), std::string::npos) << r.outcome.message;
 }
 
+// A column a few grains across (6 mm: ~34 grains) leaves a heap whose "slope" is a
+// line through a handful of bins: the angle is reported, with a warning that it is
+// no measurement. (The cheap 15 mm column passes: FrictionRaisesTheAngle... checks.)
+TEST(ReposeScene, AHeapTooSmallForASlopeIsWarned) {
+  ReposeConfig c = cheap(30.0, 0.1);
+  c.column_width = c.column_height = 0.006;
+  const ReposeResult r = run_repose(c);
+  report("6 mm column", r);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  ASSERT_LT(r.fit_points, ReposeResult::kMinSlopeBins);
+  const auto warned = [](const ReposeResult& x) {
+    return std::any_of(x.outcome.warnings.begin(), x.outcome.warnings.end(),
+                       [](const std::string& w) { return w.find("profile bins, fewer than 6") != std::string::npos; });
+  };
+  EXPECT_TRUE(warned(r));
+}
+
 TEST(ReposeScene, FrictionRaisesTheAngleAndRollingResistanceRaisesItFurther) {
   // theta = eta = 0 dissipates nothing in the seed's law; a background viscous
   // drag in the collapse lets it come to rest (recorded as collapse_drag).
@@ -431,6 +450,10 @@ TEST(ReposeScene, FrictionRaisesTheAngleAndRollingResistanceRaisesItFurther) {
   EXPECT_NE(r2.boundaries.find("periodic"), std::string::npos);
   EXPECT_GT(r2.particles, 100);
   EXPECT_NEAR(r2.column_height, 0.015, 0.001);
+  for (const ReposeResult* r : {&r1, &r2}) {  // a slope, not a line through a few bins
+    EXPECT_GE(r->fit_points, ReposeResult::kMinSlopeBins);
+    for (const auto& w : r->outcome.warnings) EXPECT_EQ(w.find("profile bins, fewer than"), std::string::npos) << w;
+  }
 }
 
 TEST(ReposeScene, FrictionalSideWallsSteepenTheDeposit) {
