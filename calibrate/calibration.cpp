@@ -62,16 +62,12 @@ void require_levels(const ResponseSurface& rs, const std::string& job) {
 void refuse_redundant(const std::vector<Target>& targets) {
   std::map<std::pair<std::string, std::string>, std::string> reads;  // (plus, minus) -> the target's name
   for (const auto& t : targets) {
-    MetricSpec s = metric_spec(t.metric);
-    if (s.plus == "phi_diff_deg" && s.minus.empty()) {  // the triaxial scene stores the difference too
-      s.plus = "phi_peak_deg";
-      s.minus = "phi_cv_deg";
-    }
-    const auto [it, fresh] = reads.emplace(std::make_pair(s.plus, s.minus), t.metric);
+    const auto [plus, minus] = stored_reading(t.metric);
+    const auto [it, fresh] = reads.emplace(std::make_pair(plus, minus), t.metric);
     if (fresh) continue;
     if (it->second == t.metric) throw JobError("--target", "metric \"" + t.metric + "\" given twice");
-    throw JobError("--target", "\"" + it->second + "\" and \"" + t.metric + "\" are the same stored metric (" + s.plus +
-                                   (s.minus.empty() ? "" : " - " + s.minus) +
+    throw JobError("--target", "\"" + it->second + "\" and \"" + t.metric + "\" are the same stored metric (" + plus +
+                                   (minus.empty() ? "" : " - " + minus) +
                                    "): the misfit would count its residual twice; give it once");
   }
   for (const auto& [diff, name] : reads) {

@@ -56,11 +56,6 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
 
 std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where) {
   if (!store.find_job(job)) throw jobs::JobError("--job", "no job named \"" + job + "\"");
-  // Pinned, it would leave one pressure and read "needs at least two".
-  for (const auto& w : where)
-    if (w.key == "confining_kpa")
-      throw jobs::JobError("--where", "confining_kpa is the envelope's axis: it is fitted across the confining "
-                                      "pressures, so it cannot be pinned");
   const auto rows = jobs::select_rows(store, job, where);
   if (rows.empty()) throw jobs::JobError("--where", "no task of job \"" + job + "\" matches the filters");
   // The wrong kind of job is the first thing to say, before asking to pin a parameter.
@@ -68,6 +63,11 @@ std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& jo
     if (!r.params.contains("confining_kpa") || !r.params.contains("theta_deg") || !r.params.contains("eta"))
       throw jobs::JobError("--job", "job \"" + job + "\" has no confining_kpa, theta_deg and eta parameters (scene " + r.task.scene +
                                         "); an envelope needs triaxial tasks");
+  // Pinned, it would leave one pressure and read "needs at least two".
+  for (const auto& w : where)
+    if (w.key == "confining_kpa")
+      throw jobs::JobError("--where", "confining_kpa is the envelope's axis: it is fitted across the confining "
+                                      "pressures, so it cannot be pinned");
   std::map<std::string, std::set<std::string>> seen;
   for (const auto& r : rows)
     for (const auto& [k, v] : r.params.items())

@@ -146,13 +146,11 @@ void apply_sigma(std::vector<Target>& targets, const std::string& text) {
   if (!parse_number(value, s) || !(s > 0))
     throw JobError("--sigma", "sigma of " + name + " must be a positive finite number, got \"" + value + "\"");
   // Matched as --target matches names: phi_peak and phi_peak_deg are one metric.
-  const MetricSpec want = metric_spec(name);
   bool found = false;
   for (auto& t : targets) {
-    const MetricSpec have = metric_spec(t.metric);
-    if (have.plus != want.plus || have.minus != want.minus) continue;
+    if (stored_reading(t.metric) != stored_reading(name)) continue;
     // A second value would silently win over the first.
-    if (!std::isnan(t.sigma)) throw JobError("--sigma", "metric \"" + name + "\" given twice");
+    if (!std::isnan(t.sigma)) throw JobError("--sigma", "metric \"" + t.metric + "\" given twice");
     t.sigma = s;
     found = true;
   }

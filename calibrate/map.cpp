@@ -179,12 +179,14 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   }
   // One value everywhere, as gnuplot reads the files: it refuses an empty colour range.
   const bool flat = zlo <= zhi && num(zlo) == num(zhi);
+  // A range around it that prints as two numbers (%.10g): relative, for 2.65e12 too.
+  const double pad = std::max(1e-3 * std::abs(zlo), 1e-12);
   // Pass 1: contour lines as tables.
   {
     std::ofstream g(path("tables.gp"));
     g << "set contour base\nunset surface\nset cntrparam levels auto 10\n";
     // A flat surface has no iso-lines; without a range gnuplot warns of an empty one.
-    if (flat) g << "set zrange [" << num(zlo - 1.0) << ":" << num(zlo + 1.0) << "]\n";
+    if (flat) g << "set zrange [" << num(zlo - pad) << ":" << num(zlo + pad) << "]\n";
     g << "set table " << quoted(path("cont.dat")) << "\nsplot " << quoted(path("full.dat")) << " using 1:2:3 with lines\nunset table\n";
     if (r.overlay)
       g << "set autoscale z\nset cntrparam levels discrete 0.5\nset table " << quoted(path("region.dat")) << "\nsplot " << quoted(path("mask.dat"))
@@ -231,7 +233,6 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     << "set bmargin at screen 0.21\nset key at screen 0.5,0.1 center horizontal maxrows 3\n"
     << "set style textbox opaque noborder\n";
   if (flat) {
-    const double pad = std::max(1e-3 * std::abs(zlo), 1e-12);
     g << "set cbrange [" << num(zlo - pad) << ":" << num(zlo + pad) << "]\n";
   } else if (zhi > zlo) {
     g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";

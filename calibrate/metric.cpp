@@ -28,6 +28,12 @@ MetricSpec metric_spec(const std::string& name) {
   return {name, name, name, ""};
 }
 
+std::pair<std::string, std::string> stored_reading(const std::string& name) {
+  const MetricSpec s = metric_spec(name);
+  if (s.plus == "phi_diff_deg" && s.minus.empty()) return {"phi_peak_deg", "phi_cv_deg"};
+  return {s.plus, s.minus};
+}
+
 std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std::pair<std::string, double>>& metrics) {
   auto find = [&](const std::string& n) -> std::optional<double> {
     for (const auto& [k, v] : metrics)

@@ -19,6 +19,10 @@ struct MetricSpec {
 const std::vector<std::string>& metric_aliases();
 // The alias, or a stored metric name used as it is.
 MetricSpec metric_spec(const std::string& name);
+// What a name reads, as (plus, minus) of stored metrics, the same for every name of
+// one quantity: phi_peak and phi_peak_deg; phi_diff and the triaxial scene's stored
+// phi_diff_deg (phi_peak_deg - phi_cv_deg).
+std::pair<std::string, std::string> stored_reading(const std::string& name);
 bool is_alias(const std::string& name);
 // The value for one task, or nothing when the task lacks a stored metric it needs
 // or the value is not finite.

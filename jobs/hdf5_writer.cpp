@@ -92,7 +92,8 @@ OutputWriteError write_failed(const std::string& path, const H5::Exception& e) {
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
   const bool full = !folder_takes_a_file(dir.empty() ? std::filesystem::path(".") : dir);
   return OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
-                              (full ? " (the disk is full: the folder takes no further file)"
+                              (full ? " (the folder takes no further file: a full disk or quota, or the folder "
+                                      "removed or made read-only)"
                                     : " (is the disk full, or the folder not writable?)"),
                           full);
 }

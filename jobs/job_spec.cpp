@@ -223,7 +223,7 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     try {
       scene.resolve(params[i], job.fidelity);
     } catch (const JobError& e) {
-      const std::string where = params.size() > 1 ? " (task " + std::to_string(i) + " of the grid)" : "";
+      const std::string where = params.size() > 1 ? " (task #" + std::to_string(i) + " of the grid)" : "";
       throw JobError(axis_value_path(scene, set, e.path(), given), e.reason() + where);
     }
     Task t;

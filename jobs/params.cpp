@@ -150,9 +150,9 @@ nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const s
       const double d = v.get<double>();
       if (!std::isfinite(d)) throw JobError(path, "must be finite, got " + v.dump());
       if (v.is_number_float() && std::floor(d) != d) throw JobError(path, "expected an integer, got " + v.dump());
+      check_range(s, d, path);  // the parameter's own range first: it is the one to meet
       // Past 9e15 a double no longer holds every integer: an integer, but out of range.
       if (std::abs(d) > 9.0e15) throw JobError(path, "must be at most 9e15 in magnitude, got " + v.dump());
-      check_range(s, d, path);
       return v.is_number_float() ? nlohmann::json(static_cast<std::int64_t>(d)) : nlohmann::json(v.get<std::int64_t>());
     }
     case ParamType::real: {

@@ -13,7 +13,7 @@ namespace demcal::jobs {
 // read-only or removed). For a task's HDF5 file, when the folder takes no file
 // either, every later task would fail the same way after running: the runner stops.
 // `folder_full`: the folder took no further file while the failed write's part was
-// still on disk. Judged then, not after the part is removed: a task's own file can
+// still on disk (a full disk or quota, or the folder removed or made read-only). Judged then, not after the part is removed: a task's own file can
 // fill the disk and leave room again once deleted, and the next task would fail alike.
 class OutputWriteError : public std::runtime_error {
  public:

@@ -22,7 +22,6 @@ bool numbers_equal(double a, double b) {
   return a == b || (std::isfinite(a) && std::isfinite(b) && std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)));
 }
 
-
 nlohmann::json special(const db::TaskRow& t, const std::string& key) {
   if (key == "status") return t.status;
   if (key == "scene") return t.scene;
@@ -339,7 +338,6 @@ bool value_matches(const nlohmann::json& v, const std::string& want) {
   const nlohmann::json w = nlohmann::json::parse(want, nullptr, false);
   return !w.is_discarded() && same_structure(v, w);
 }
-
 
 Where parse_where(const std::string& text) {
   const auto eq = text.find('=');

@@ -482,6 +482,8 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
   std::vector<std::int64_t> dropped;
   const std::string spec = job.spec.dump();
   const std::optional<std::string> earlier = store.job_spec(job.name);
+  const bool edited = earlier && *earlier != spec;
+  const std::size_t had = edited ? store.task_statuses(job.name).size() : 0;
   const std::int64_t id = store.put_job(job.name, spec, tasks, shard.active(), &dropped);
   if (!dropped.empty()) {
     // A job is its latest spec; without this line the tasks of an edited grid
@@ -501,10 +503,13 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
     else
       log << "job " << job.name << ": its spec differs from the last run's in this database; " << dropped.size()
           << kept << ". Give the job another name to keep both\n";
-  } else if (earlier && *earlier != spec) {
-    // A grown grid, or an edit that moved no task: the job is the new spec all the same.
-    log << "job " << job.name << ": its spec differs from the last run's in this database; every task of the last "
-        << "run is still part of it (its results are kept), and the job is now this spec\n";
+  } else if (edited) {
+    // A grown grid. (An edit that moves no task, a description or 2650 written as
+    // 2650.0, is not worth a line.)
+    const std::size_t now = store.task_statuses(job.name).size();
+    if (now > had)
+      log << "job " << job.name << ": its spec differs from the last run's in this database; " << now - had
+          << " task(s) are new, and every task of the last run is still part of it (its results are kept)\n";
   }
   return id;
 }

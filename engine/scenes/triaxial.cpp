@@ -610,6 +610,14 @@ struct ShearRecorder {
   }
 };
 
+// Grains whose centres lie in the interior now.
+long interior_count(const Rig& rig) {
+  const Region in = rig.interior();
+  long n = 0;
+  for (const Vec3& x : rig.world.particles().x) n += in.contains(x) ? 1 : 0;
+  return n;
+}
+
 // The deviatoric stage: top and bottom walls at a constant axial strain rate,
 // lateral walls servo-held at p0, to the target axial strain.
 void shear(Rig& rig, TriaxialResult& res) {
@@ -628,8 +636,7 @@ void shear(Rig& rig, TriaxialResult& res) {
     double n_in = 0.0;
     const Mat3 lw = interior_stress(world, rig.interior(), n_in);
     res.porosity_interior_initial = n_in;
-    const Region in = rig.interior();
-    for (const Vec3& x : world.particles().x) res.interior_grains += in.contains(x) ? 1 : 0;
+    res.interior_grains = interior_count(rig);
     const double p_walls = rig.mean_stress();
     res.lw_wall_mismatch = std::abs(lw.trace() / 3.0 - p_walls) / p_walls;
   }
@@ -685,6 +692,8 @@ void shear(Rig& rig, TriaxialResult& res) {
     }
   }
   if (obs) obs->on_snapshot("final", world.time(), world.particles());
+  // The interior shrinks with the sample: the critical state is measured on fewer.
+  res.interior_grains = std::min(res.interior_grains, interior_count(rig));
   rig.stop_walls();
   res.shear_stress_error_mean = rec.err_n ? rec.err_sum / static_cast<double>(rec.err_n) : 0.0;
   res.stages.push_back(rig.report("shear", rec.s0, true, rig.stress_error(0, 3)));
@@ -765,7 +774,7 @@ void judge_the_interior(const TriaxialConfig& cfg, TriaxialResult& res) {
     *v = NAN;
   res.outcome.warnings.push_back("the interior (the box less d_max = " + fmt(cfg.material.d_max) +
                                  " m from each wall) held " + std::to_string(res.interior_grains) +
-                                 " grains at the start of shear, fewer than " +
+                                 " grains at the start or the end of shear, fewer than " +
                                  std::to_string(TriaxialResult::kMinInteriorGrains) +
                                  ": its porosity, Love-Weber stress, angles and coordination are not measured "
                                  "(more triaxial.particles give it grains)");
@@ -782,7 +791,9 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    " was on during shear: a diagnostic, not the seed's undamped protocol; its forces "
                                    "carry part of the load, so the walls' angles overstate the contact network's "
                                    "(phi_cv " + fmt(res.phi_cv_deg, 3) + " deg at the walls, " +
-                                   fmt(res.phi_cv_interior_deg, 3) + " deg in the interior)");
+                                   (std::isnan(res.phi_cv_interior_deg) ? std::string("not measured")
+                                                                        : fmt(res.phi_cv_interior_deg, 3) + " deg") +
+                                   " in the interior)");
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");

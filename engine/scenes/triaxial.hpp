@@ -169,8 +169,8 @@ struct TriaxialResult {
   double max_dilatancy_deg = 0;     // max of asin(-deps_v / (2 deps1 - deps_v))
   double max_inertial_number = 0;
   double lw_wall_mismatch = 0;      // |p_LW - p_walls| / p_walls at the start of shear
-  // Grains whose centres lie in the interior (the box less d_max from each wall) at
-  // the start of shear. Below kMinInteriorGrains the interior measures nothing: its
+  // Grains whose centres lie in the interior (the box less d_max from each wall), the
+  // fewer of the start and the end of shear. Below kMinInteriorGrains the interior measures nothing: its
   // metrics above are NaN and a warning says why.
   long interior_grains = 0;
   static constexpr long kMinInteriorGrains = 20;

@@ -377,6 +377,9 @@ TEST(Inversion, ParsesTargetsAndSigmas) {
   std::vector<Target> other = {calibrate::parse_target("phi_cv=30")};
   calibrate::apply_sigma(other, "phi_cv_deg=0.7");  // the stored name of the same metric
   EXPECT_DOUBLE_EQ(other[0].sigma, 0.7);
+  std::vector<Target> diff = {calibrate::parse_target("phi_diff=5")};
+  calibrate::apply_sigma(diff, "phi_diff_deg=1");  // the scene's stored difference
+  EXPECT_DOUBLE_EQ(diff[0].sigma, 1.0);
 }
 
 }  // namespace

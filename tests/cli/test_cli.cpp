@@ -572,12 +572,19 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
   write(d.file("c.json"), collision_job("small", {0.05, 0.2, 0.3}));
   const Result grown = run_demcal({"run", "c.json"}, d.path.string());
   ASSERT_EQ(grown.rc, 0) << grown.err;
-  EXPECT_NE(grown.err.find("its spec differs from the last run's in this database; every task of the last run is "
-                           "still part of it"),
+  EXPECT_NE(grown.err.find("its spec differs from the last run's in this database; 1 task(s) are new, and every "
+                           "task of the last run is still part of it"),
             std::string::npos)
       << grown.err;
   const Result same = run_demcal({"run", "c.json"}, d.path.string());
   EXPECT_EQ(same.err.find("spec differs"), std::string::npos) << same.err;
+  // The same tasks in other words (a description added): nothing to say.
+  auto spec = nlohmann::json::parse(collision_job("small", {0.05, 0.2, 0.3}));
+  spec["description"] = "the same three tasks";
+  write(d.file("e.json"), spec.dump());
+  const Result reworded = run_demcal({"run", "e.json"}, d.path.string());
+  ASSERT_EQ(reworded.rc, 0) << reworded.err;
+  EXPECT_EQ(reworded.err.find("spec differs"), std::string::npos) << reworded.err;
 }
 
 // The same job file after an upgrade that changed a scene's physics (every key moves):

@@ -212,12 +212,14 @@ TEST(Validation, TypoSuggestsTheKnownKey) {
   EXPECT_NE(error_of(j.dump()).find("did you mean \"particles\""), std::string::npos);
 }
 
-// 2^53 + 1 is an integer: it is refused for its size, not as "expected an integer".
+// 2^53 + 1 is an integer: it is refused for its size (the field's own range), not as
+// "expected an integer".
 TEST(Validation, AnIntegerPastTheRangeOfADoubleIsOutOfRange) {
   json j = json::parse(kBase);
   j["seed"] = 9007199254740993ULL;
   const std::string msg = error_of(j.dump());
-  EXPECT_EQ(msg.rfind("seed: must be at most 9e15 in magnitude, got 9007199254740993", 0), 0u) << msg;
+  EXPECT_EQ(msg.rfind("seed: must be ", 0), 0u) << msg;
+  EXPECT_EQ(msg.find("expected an integer"), std::string::npos) << msg;
   j["seed"] = 1.5;
   EXPECT_EQ(error_of(j.dump()).rfind("seed: expected an integer, got 1.5", 0), 0u) << error_of(j.dump());
 }
