@@ -3,12 +3,11 @@
 namespace demcal::jobs {
 
 std::uint64_t grid_size(const ParamSet& set, int replicas) {
-  const std::uint64_t cap = grid_size_cap;
   std::uint64_t n = static_cast<std::uint64_t>(replicas);
   for (const auto& a : set.axes) {
     // Tested before multiplying: eight axes of 256 values make exactly 2^64, which
     // wrapped to 0 and passed the task limit.
-    if (!a.values.empty() && n > cap / a.values.size()) return cap;
+    if (!a.values.empty() && n > grid_size_cap / a.values.size()) return grid_size_cap;
     n *= a.values.size();
   }
   return n;

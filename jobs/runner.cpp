@@ -483,7 +483,7 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
   const std::string spec = job.spec.dump();
   const std::optional<std::string> earlier = store.job_spec(job.name);
   const bool edited = earlier && *earlier != spec;
-  const std::size_t had = edited ? store.task_statuses(job.name).size() : 0;
+  const int had = edited ? job_counts(store, job.name, Shard{}).total : 0;
   const std::int64_t id = store.put_job(job.name, spec, tasks, shard.active(), &dropped);
   if (!dropped.empty()) {
     // A job is its latest spec; without this line the tasks of an edited grid
@@ -506,7 +506,7 @@ std::int64_t record_job(db::Store& store, const Job& job, const Shard& shard, st
   } else if (edited) {
     // A grown grid. (An edit that moves no task, a description or 2650 written as
     // 2650.0, is not worth a line.)
-    const std::size_t now = store.task_statuses(job.name).size();
+    const int now = job_counts(store, job.name, Shard{}).total;
     if (now > had)
       log << "job " << job.name << ": its spec differs from the last run's in this database; " << now - had
           << " task(s) are new, and every task of the last run is still part of it (its results are kept)\n";
