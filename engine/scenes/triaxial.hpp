@@ -147,6 +147,11 @@ struct TriaxialResult {
   // default sampling): the maximum of noisy rows reads high by about the noise, the
   // more so the smaller the sample; the difference says how much.
   double phi_peak_smoothed_deg = NAN;
+  static constexpr int kPeakSmoothingRows = 5;
+  // A peak this far above the smoothed one rests on a spike of one or two rows (a
+  // force chain against a wall that loads and buckles), not on the stress-strain
+  // curve's hump: the run warns.
+  static constexpr double kPeakTransientDeg = 2.0;
   // phi_cv: the angle of the mean stress ratio over the window; its standard error
   // counts the rows' correlation (integrated autocorrelation time): the noise of this
   // run only, not the scatter between packings (replicas measure that).
@@ -209,5 +214,11 @@ TriaxialResult run_triaxial(const TriaxialConfig& config, Observer* observer = n
 // its standard error, and res.cv_effective_samples below 4 (set it first).
 void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& eps1, const std::vector<double>& eps_v,
                           const std::vector<double>& phi_deg, TriaxialResult& res);
+
+// Whether phi_peak is the curve's peak or a transient: warns when res.phi_peak_deg
+// exceeds res.phi_peak_smoothed_deg by more than TriaxialResult::kPeakTransientDeg
+// (nothing when the smoothed peak is not measured). Set both, eps1_at_peak and the
+// interior's peak first.
+void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res);
 
 }  // namespace demcal::engine

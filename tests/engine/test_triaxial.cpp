@@ -461,6 +461,9 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   EXPECT_NEAR(r.phi_peak_smoothed_deg, std::asin(best5) * deg, 1e-10);
   EXPECT_LE(r.phi_peak_smoothed_deg, r.phi_peak_deg);
   std::printf("[ report   ] phi_peak %.2f, smoothed over 5 rows %.2f deg\n", r.phi_peak_deg, r.phi_peak_smoothed_deg);
+  bool spike_warned = false;
+  for (const auto& w : r.outcome.warnings) spike_warned |= w.find("rests on a spike") != std::string::npos;
+  EXPECT_EQ(spike_warned, r.phi_peak_deg - r.phi_peak_smoothed_deg > TriaxialResult::kPeakTransientDeg);
   EXPECT_EQ(r.eps1_at_peak, eps_at_best);
   EXPECT_EQ(r.q_peak, q_at_best);
   EXPECT_NEAR(r.phi_cv_deg, std::asin(sum / n) * deg, 1e-10);
@@ -575,6 +578,46 @@ TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
   judge_critical_state(cfg, {0.2, 0.3}, {0.0, 0.0}, {28.0, 28.0}, two);
   EXPECT_TRUE(std::isnan(two.cv_dilatancy_deg));
   EXPECT_TRUE(std::isnan(two.cv_drift_deg));
+}
+
+// The figures of a run that met it (500 grains, dt factor 0.15, seed 3: the axial
+// walls' stress up 80% for two rows at eps1 = 0.10, the interior's not at all).
+TEST(PeakStrength, APeakOnASpikeOfTheWallStressIsWarned) {
+  TriaxialConfig cfg;
+  auto judged = [&](double peak, double smoothed) {
+    TriaxialResult r;
+    r.phi_peak_deg = peak;
+    r.phi_peak_smoothed_deg = smoothed;
+    r.eps1_at_peak = 0.103;
+    r.phi_peak_interior_deg = 38.22;
+    r.interior_grains = 100;
+    judge_peak(cfg, r);
+    return r;
+  };
+  const TriaxialResult spike = judged(46.33, 38.84);
+  ASSERT_EQ(spike.outcome.warnings.size(), 1u);
+  const std::string& w = spike.outcome.warnings.front();
+  for (const char* part : {"phi_peak 46.33 deg", "eps1 0.103", "rests on a spike", "0.005 of strain", "peaks at 38.84 deg",
+                           "interior's Love-Weber stress peaks at 38.22 deg", "phi_peak_smoothed_deg"})
+    EXPECT_NE(w.find(part), std::string::npos) << part << " not in: " << w;
+  EXPECT_EQ(w.find("; "), std::string::npos) << "a task's warnings are joined with '; ': " << w;
+  // The noise of a small sample's rows (0.4-0.8 deg at 500 grains) is no spike.
+  EXPECT_TRUE(judged(39.31, 38.58).outcome.warnings.empty());
+  EXPECT_TRUE(judged(40.0, 40.0 - TriaxialResult::kPeakTransientDeg).outcome.warnings.empty());
+  // Fewer rows than the running mean: nothing to compare, nothing said.
+  EXPECT_TRUE(judged(46.33, NAN).outcome.warnings.empty());
+  // An interior too small to measure is not quoted.
+  TriaxialResult small;
+  small.phi_peak_deg = 46.33;
+  small.phi_peak_smoothed_deg = 38.84;
+  small.phi_peak_interior_deg = NAN;
+  small.interior_grains = 9;
+  judge_peak(cfg, small);
+  ASSERT_EQ(small.outcome.warnings.size(), 1u);
+  EXPECT_EQ(small.outcome.warnings.front().find("interior"), std::string::npos) << small.outcome.warnings.front();
+  // Rows every N steps: the span is said in rows.
+  cfg.sample_steps = 200;
+  EXPECT_NE(judged(46.33, 38.84).outcome.warnings.front().find("over 5 rows"), std::string::npos);
 }
 
 TEST(TriaxialScene, QuasiStaticWarningAboveTheInertialLimit) {
