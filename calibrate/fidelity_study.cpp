@@ -2,6 +2,8 @@
 #include "study.hpp"
 #include "study_support.hpp"
 
+#include "engine/scenes/triaxial.hpp"
+
 
 #include <algorithm>
 #include <map>
@@ -29,6 +31,10 @@ struct FidelityDef {
   std::string name, scene;
   nlohmann::json material, base;      // base: the scene section at the baseline
   std::vector<std::string> metrics;   // error metrics
+  // A peak metric and its smoothed twin: a replica whose peak exceeds the smoothed one
+  // by more than the scene's warning threshold rests on a spike, and the study says so
+  // (one spike can set a setting's mean and spread, and so a verdict).
+  std::string peak_metric, smoothed_peak_metric;
   std::vector<KnobDef> knobs;
 };
 
@@ -44,6 +50,8 @@ FidelityDef fidelity_def(const std::string& name, bool quick) {
   if (name == "fidelity") {
     d.scene = "triaxial";
     d.metrics = {"phi_peak_deg", "phi_cv_deg"};
+    d.peak_metric = "phi_peak_deg";
+    d.smoothed_peak_metric = "phi_peak_smoothed_deg";
     // The baseline is the seed study's (examples/seed-study): dense, 100 kPa,
     // theta 30 deg, eta 0.1, 500 grains, 3e-4 /s, so its tasks are shared with it.
     if (!quick) {
@@ -244,7 +252,9 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
     f.precision(8);
     const auto quoted = [](const FidelityPoint& p) {
       return "\"" + p.label + (p.reference ? " (ref)" : "") + (p.failed > 0 && p.failed < p.replicas ? " (" +
-             std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed)" : "") + "\"";
+             std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed)" : "") +
+             (p.spikes.empty() ? "" : " (" + std::to_string(p.spikes.size()) + "/" + std::to_string(p.replicas) +
+              " peak on a spike)") + "\"";
     };
     f << "# block 0: wall_s, per metric error and replica sd, label\n";
     int n = 0;
@@ -343,7 +353,7 @@ void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
   c.precision(6);
   c << "knob,setting,baseline,reference,replicas,failed,wall_s,particle_steps";
   for (const auto& m : s.metrics) c << "," << m << "_mean," << m << "_sd," << m << "_error";
-  c << ",score,pass,pareto,recommended,failures\n";
+  c << ",score,pass,pareto,recommended,peak_spikes,failures\n";
   for (const auto& k : s.knobs)
     for (const auto& p : k.points) {
       c << k.name << "," << p.label << "," << p.baseline << "," << p.reference << "," << p.replicas << "," << p.failed
@@ -352,7 +362,8 @@ void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
       std::string fails;
       for (const auto& e : p.failures) fails += (fails.empty() ? "" : "; ") + e;
       std::replace(fails.begin(), fails.end(), '"', '\'');
-      c << "," << p.score << "," << p.pass << "," << p.pareto << "," << p.recommended << ",\"" << fails << "\"\n";
+      c << "," << p.score << "," << p.pass << "," << p.pareto << "," << p.recommended << "," << p.spikes.size()
+        << ",\"" << fails << "\"\n";
     }
   c.commit();
 }
@@ -479,6 +490,15 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           if (std::isfinite(wall)) failed_wall.push_back(wall);
           continue;
         }
+        if (!d.peak_metric.empty()) {
+          const double peak = metric(r, d.peak_metric), smoothed = metric(r, d.smoothed_peak_metric);
+          if (peak - smoothed > engine::TriaxialResult::kPeakTransientDeg) {
+            const std::string spike = seed + ": " + short_metric(d.peak_metric) + " " + fmt(peak, 4) +
+                                      " deg, the running mean's peak " + fmt(smoothed, 4) + " deg";
+            p.spikes.push_back(spike);
+            s.spikes.push_back(k.name + "=" + p.label + " " + spike);
+          }
+        }
         ok_wall.push_back(wall);
         ok_work.push_back(metric(r, "particles") * metric(r, "steps"));
         for (std::size_t m = 0; m < nm; ++m) vals[m].push_back(metric(r, d.metrics[m]));
@@ -540,6 +560,14 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance)
           << " deg including the replica spread";
     }
+    std::string spiked;
+    for (const auto& p : k.points)
+      if (!p.spikes.empty())
+        spiked += (spiked.empty() ? "" : ", ") + p.label + (p.reference ? " (the reference)" : "") + ": " +
+                  std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
+    if (!spiked.empty())
+      rec << "; " << short_metric(d.peak_metric) << " rests on a spike of the walls' stress in " << spiked
+          << " replica(s), listed below";
     k.recommendation = rec.str();
     s.knobs.push_back(std::move(k));
   }
@@ -574,6 +602,10 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     if (!s.failures.empty()) {
       r << "failed tasks:\n";
       for (const auto& f : s.failures) r << "  " << f << "\n";
+    }
+    if (!s.spikes.empty()) {
+      r << kSpikeHeading << ":\n";
+      for (const auto& f : s.spikes) r << "  " << f << "\n";
     }
     r.commit();
   }

@@ -104,6 +104,7 @@ struct FidelityPoint {
   bool baseline = false, reference = false;
   int replicas = 0, failed = 0;  // tasks; failed: failed, or done without the metric
   std::vector<std::string> failures;  // "seed 2: not_converged in stage ...", one per failed task
+  std::vector<std::string> spikes;    // "seed 3: phi_peak 46.33 deg, the running mean's peak 38.84 deg"
   double wall_s = NAN;           // mean engine wall seconds (of the ok replicas; all failed: of the failed)
   double work = NAN;             // mean particles x steps of the ok replicas: the load-independent cost
                                  // "cheapest" and the Pareto front use (wall time on a shared machine is noisy)
@@ -133,10 +134,16 @@ struct FidelityStudy {
   std::vector<FidelityKnob> knobs;
   std::vector<std::string> job_files;   // written into out_dir/jobs, runnable with `demcal run`
   std::vector<std::string> failures;    // "particles=2000 seed 2: ..." every failed task
+  std::vector<std::string> spikes;      // "dt=0.15 seed 3: ..." every replica whose peak rests on a spike
   std::string baseline;                 // "particles 500, rate 0.0003, ..."
   std::string recommendation;           // summary line
   std::vector<std::string> files;
 };
+
+// What the list of replicas whose peak rests on a spike is headed with (table and file).
+inline constexpr const char* kSpikeHeading =
+    "peak on a spike of the walls' stress (phi_peak more than 2 deg above its 5-row running mean, which "
+    "phi_peak_smoothed_deg holds: the steadier figure)";
 
 // The knobs a fidelity study has (for errors and help), and a check of the
 // options that throws JobError ("--knobs", "--reference", ...) before anything is

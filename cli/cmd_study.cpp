@@ -70,7 +70,8 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
         std::cout << line;
       }
       std::cout << (p.pareto ? "  pareto" : "") << (p.recommended ? "  recommended" : "")
-                << (p.failed > 0 ? "  FAILED " + std::to_string(p.failed) : "") << "\n";
+                << (p.failed > 0 ? "  FAILED " + std::to_string(p.failed) : "")
+                << (p.spikes.empty() ? "" : "  spike " + std::to_string(p.spikes.size())) << "\n";
     }
     std::cout << "  " << k.recommendation << "\n";
   }
@@ -79,6 +80,10 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
   if (!s.failures.empty()) {
     std::cout << "failed tasks (" << s.failures.size() << "):\n";
     for (const auto& f : s.failures) std::cout << "  " << f << "\n";
+  }
+  if (!s.spikes.empty()) {
+    std::cout << calibrate::kSpikeHeading << " (" << s.spikes.size() << "):\n";
+    for (const auto& f : s.spikes) std::cout << "  " << f << "\n";
   }
   std::cout << s.recommendation << "\n";
   for (const auto& f : s.files) std::cout << "wrote " << f << "\n";

@@ -1,9 +1,11 @@
 // demcal study (issue 9): quick versions run in seconds, write their charts and a
 // recommendation, store the timestep tasks in the database, and bad input fails
 // with a clear message and exit code 2.
+#include "calibrate/study.hpp"
 #include "cli_util.hpp"
 
 #include <fcntl.h>
+#include <sqlite3.h>
 #include <sys/file.h>
 #include <unistd.h>
 
@@ -189,6 +191,38 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   ASSERT_EQ(again.rc, 0) << again.err;
   EXPECT_NE(again.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << again.out;
   EXPECT_EQ(slurp(d.file("f/fidelity-dt_recommendation.txt")), first);
+  // A replica whose peak rests on a spike (its phi_peak 5 deg above the running mean's
+  // peak, as a buckling wall chain makes it) is marked, counted and listed: one such
+  // replica can set a setting's mean, spread and verdict. The quick study's inertial
+  // shear spikes by itself (up to 20 deg at its start), so the stored peaks are first
+  // set to their smoothed values, then one is raised.
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(d.file("s.db").c_str(), &db), SQLITE_OK);
+  const std::string smoothed =
+      "(SELECT m.value FROM metrics m WHERE m.task_id = metrics.task_id AND m.name = 'phi_peak_smoothed_deg')";
+  const std::string flatten = "UPDATE metrics SET value = " + smoothed + " WHERE name = 'phi_peak_deg'";
+  EXPECT_EQ(sqlite3_exec(db, flatten.c_str(), nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  EXPECT_EQ(sqlite3_changes(db), 4);  // the four tasks that ran to the end
+  const std::string raise = "UPDATE metrics SET value = 5 + " + smoothed +
+                            " WHERE name = 'phi_peak_deg' AND task_id = (SELECT id FROM tasks WHERE "
+                            "json_extract(params_json, '$.dt_factor') = 0.15 AND json_extract(params_json, '$.seed') = 2)";
+  EXPECT_EQ(sqlite3_exec(db, raise.c_str(), nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  EXPECT_EQ(sqlite3_changes(db), 1);
+  sqlite3_close(db);
+  const Result spiked = run_demcal(args, d.path.string());
+  ASSERT_EQ(spiked.rc, 0) << spiked.err;
+  EXPECT_NE(spiked.out.find("0.15*  "), std::string::npos) << spiked.out;
+  EXPECT_NE(spiked.out.find("  spike 1\n"), std::string::npos) << spiked.out;
+  EXPECT_NE(spiked.out.find("phi_peak rests on a spike of the walls' stress in 0.15 (the reference): 1 of 2 replica(s), "
+                            "listed below"),
+            std::string::npos)
+      << spiked.out;
+  EXPECT_NE(spiked.out.find(std::string(demcal::calibrate::kSpikeHeading) + " (1):\n  dt=0.15 seed 2: phi_peak "),
+            std::string::npos)
+      << spiked.out;
+  EXPECT_NE(slurp(d.file("f/fidelity-dt_recommendation.txt")).find("  dt=0.15 seed 2: phi_peak "), std::string::npos);
+  EXPECT_NE(slurp(d.file("f/fidelity-dt.csv")).find(",1,\""), std::string::npos);  // peak_spikes of the 0.15 row
+  EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"0.15 (ref) (1/2 peak on a spike)\""), std::string::npos);
 }
 
 TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
