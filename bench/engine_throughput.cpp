@@ -43,8 +43,8 @@ double wall_pressure(const World& w) {
 
 // Grains of a random cloud grow homogeneously inside six fixed walls, the growth
 // rate servoed on the wall pressure (no transport across the box is needed, unlike
-// moving walls), frictionless first, then friction and rolling resistance are
-// switched on and the pack relaxes at the target pressure.
+// moving walls): frictionless until jammed, then with friction and rolling
+// resistance until the pack holds the target pressure in equilibrium.
 // `unsettled` receives why the pack is not the one asked for ("" when it is).
 World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std::string& unsettled) {
   std::mt19937_64 rng(42);
@@ -73,10 +73,12 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
   // Growth must stay quasi-static: an impact at the growth speed v = r*rate/dt
   // pushes with v*sqrt(Kn m), which must stay well below the target contact force
   // p d^2. Fast until the pack jams (Z >= 4), then slow and servoed on the stress.
-  auto grow = [&](long steps) {
+  // Once friction is on the pack is jammed whatever its Z (frictional spheres jam
+  // below 4): the servo alone sets the rate.
+  auto grow = [&](long steps, bool frictional) {
     const double slow = 0.05 * pressure * 2.25e-6 * w.dt() / (1e-3 * std::sqrt(full.kn * 5.2));
     for (long s = 0; s < steps; s += 50) {
-      const bool jammed = 2.0 * coordination(w).contacts / n >= 4.0;
+      const bool jammed = frictional || 2.0 * coordination(w).contacts / n >= 4.0;
       const double err = 1.0 - wall_pressure(w) / pressure;
       const double rate = jammed ? std::clamp(slow * err, -slow, slow) : 1e-5;
       Particles& q = w.particles();
@@ -95,32 +97,43 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
       w.run(50);
     }
   };
-  constexpr int kRounds = 400;
-  int k = 0;
-  for (; k < kRounds; ++k) {
-    grow(500);
+  auto z = [&] { return 2.0 * coordination(w).contacts / n; };
+  auto debug = [&](const char* stage, int k) {
     if (getenv("BENCH_DEBUG"))
-      std::fprintf(stderr, "  prep %d: p %.3g ufr %.3g z %.2f\n", k, wall_pressure(w), unbalanced_force_ratio(w),
-                   2.0 * coordination(w).contacts / n);
-    // A throughput pack needs a realistic contact network, not a converged test.
-    if (2.0 * coordination(w).contacts / n >= 4.0 && std::abs(wall_pressure(w) / pressure - 1.0) < 0.35 &&
-        unbalanced_force_ratio(w) < 0.1)
-      break;
+      std::fprintf(stderr, "  %s %d: p %.3g ufr %.3g z %.2f\n", stage, k, wall_pressure(w), unbalanced_force_ratio(w),
+                   z());
+  };
+  // Frictionless growth to a jammed, roughly loaded pack; no equilibrium asked.
+  // Frictionless spheres are rigid only at Z = 6: 10,000 grains crept here at
+  // ~76 kPa, UFR 0.12, Z 4.6 for hundreds of rounds, as fast as the growth loaded
+  // them. The frictional stage below settles the pack.
+  constexpr int kRounds = 400;
+  for (int k = 0; k < kRounds; ++k) {
+    grow(500, false);
+    debug("prep", k);
+    if (z() >= 4.0 && std::abs(wall_pressure(w) / pressure - 1.0) < 0.35) break;
+  }
+  // Friction and rolling on, the growth servoed to the pressure asked for: the
+  // frictional network holds the load, so the pressure now follows the growth.
+  w.set_contact_params(full);
+  constexpr int kFrictionalRounds = 100;
+  int k = 0;
+  for (; k < kFrictionalRounds; ++k) {
+    grow(500, true);
+    debug("frictional", k);
+    if (std::abs(wall_pressure(w) / pressure - 1.0) < 0.05 && unbalanced_force_ratio(w) < 0.05) break;
   }
   // The figures are still a throughput on a jammed pack, but not on the pack asked
-  // for: say so rather than print them as if it were (10,000 grains end here at
-  // about 76 kPa with UFR 0.12).
+  // for: say so rather than print them as if it were.
   unsettled.clear();
-  if (k == kRounds) {
+  if (k == kFrictionalRounds) {
     char why[320];
     std::snprintf(why, sizeof why,
-                  "the %zu-grain pack did not settle within %d growth rounds (p %.3g kPa, asked %.3g within 35%%; "
-                  "UFR %.3g, asked < 0.1; Z %.2f): timing it as it is",
-                  n, kRounds, wall_pressure(w) / 1e3, pressure / 1e3, unbalanced_force_ratio(w),
-                  2.0 * coordination(w).contacts / n);
+                  "the %zu-grain pack did not settle within %d frictional growth rounds (p %.3g kPa, asked %.3g "
+                  "within 5%%; UFR %.3g, asked < 0.05; Z %.2f): timing it as it is",
+                  n, kFrictionalRounds, wall_pressure(w) / 1e3, pressure / 1e3, unbalanced_force_ratio(w), z());
     unsettled = why;
   }
-  w.set_contact_params(full);
   w.run(3000);
   w.set_local_damping(0.0);
   if (getenv("BENCH_DEBUG"))
@@ -133,7 +146,7 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
 
 World prepared_pack(std::size_t n, int threads, bool rolling) {
   const char* dir = std::getenv("BENCH_PACK_DIR");
-  const std::string file = dir ? std::string(dir) + "/demcal-pack-" + std::to_string(n) + ".bin" : "";
+  const std::string file = dir ? std::string(dir) + "/demcal-pack-v2-" + std::to_string(n) + ".bin" : "";
   Particles p;
   std::vector<Wall> walls;
   // A cached pack that did not settle says so each time it is timed, not only when made.

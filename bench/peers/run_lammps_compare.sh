@@ -23,7 +23,8 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 export BENCH_PACK_DIR=${BENCH_PACK_DIR:-$work}
 export OMP_NUM_THREADS=1
-pack=$BENCH_PACK_DIR/demcal-pack-$n.bin
+# The name prepared_pack() in bench/engine_throughput.cpp caches it under.
+pack=$BENCH_PACK_DIR/demcal-pack-v2-$n.bin
 if [ ! -f "$pack" ]; then
   echo "preparing the $n-grain pack (cached in $BENCH_PACK_DIR) ..." >&2
   "$build/bench/bench_engine_throughput" "$n" --steps 10 --threads 1 >/dev/null
