@@ -298,6 +298,14 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     rs.job + " come from a window the run judged not at critical state (still "
                                     "dilating or phi_mob drifting; demcal query --job " + rs.job +
                                     " shows which): the surrogate takes them as critical-state values");
+  // A peak taken from a spike of one or two rows reads degrees above the curve's hump.
+  for (const auto& rs : cal.surfaces)
+    if (rs.on_spike > 0)
+      cal.result.warnings.push_back(std::to_string(rs.on_spike) + " of the " + rs.metric + " results used from job " +
+                                    rs.job + " take phi_peak from a spike of the walls' stress that the run warned of "
+                                    "(demcal query --job " + rs.job + " shows which): the surrogate takes the spike as "
+                                    "peak strength; a target on phi_peak_smoothed_deg fits the peak of the 5-row "
+                                    "running mean instead");
   for (const auto& [job, rs] : warned) {
     // The first of the task's warnings (they are joined with "; "), cut at a word.
     std::string w = rs->first_warning;

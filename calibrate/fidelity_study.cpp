@@ -4,7 +4,6 @@
 
 #include "engine/scenes/triaxial.hpp"
 
-
 #include <algorithm>
 #include <map>
 #include <cmath>

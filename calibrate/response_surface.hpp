@@ -41,6 +41,9 @@ struct ResponseSurface {
   // Of the results used, those whose phi_cv window the run judged not at critical
   // state (still dilating, or phi_mob drifting): counted for metrics built on phi_cv.
   int not_critical = 0;
+  // Of the results used, those whose phi_peak the run judged to rest on a spike of the
+  // walls' stress: counted for metrics built on phi_peak_deg.
+  int on_spike = 0;
 
   Box box() const;                   // the job grid's bounds
   Box data_box() const;              // the bounds of the points that have data

@@ -472,8 +472,8 @@ void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
   if (res.interior_measured() && std::isfinite(res.phi_peak_interior_deg))
     interior = ", the interior's Love-Weber stress peaks at " + fmt(res.phi_peak_interior_deg) + " deg";
   res.outcome.warnings.push_back("phi_peak " + fmt(res.phi_peak_deg) + " deg (at eps1 " + fmt(res.eps1_at_peak, 3) +
-                                 ") rests on a spike of the walls' stress ratio: the running mean over " + span + " peaks at " +
-                                 fmt(res.phi_peak_smoothed_deg) + " deg" + interior +
+                                 ") rests on a spike of the walls' stress ratio: the running mean over " + span +
+                                 " peaks at " + fmt(res.phi_peak_smoothed_deg) + " deg" + interior +
                                  " (phi_peak_smoothed_deg is the steadier figure, replicas show how often spikes occur)");
 }
 

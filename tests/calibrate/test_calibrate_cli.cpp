@@ -251,6 +251,25 @@ TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
             std::string::npos)
       << r.out << r.err;
   EXPECT_EQ((r.out + r.err).find("of the phi_peak results used"), std::string::npos) << r.out << r.err;
+  // One result whose phi_peak rests on a spike: the phi_peak surface says so, the
+  // phi_cv one does not.
+  {
+    db::Connection c(db, /*read_only=*/false);
+    c.exec("UPDATE tasks SET error = 'warning: phi_peak 46.33 deg (at eps1 0.103) rests on a spike of the walls'' "
+           "stress ratio: the running mean over 0.005 of strain peaks at 38.84 deg' WHERE id = 6");
+    db::Store s(db, true);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_peak").on_spike, 1);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_diff").on_spike, 1);
+    EXPECT_EQ(calibrate::gather(s, "grid", "phi_cv").on_spike, 0);
+  }
+  r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("1 of the phi_peak results used from job grid take phi_peak from a spike of the "
+                                 "walls' stress"),
+            std::string::npos)
+      << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("a target on phi_peak_smoothed_deg fits"), std::string::npos) << r.out << r.err;
+  EXPECT_EQ((r.out + r.err).find("of the phi_cv results used from job grid take"), std::string::npos) << r.out << r.err;
 }
 
 TEST(CalibrateCli, UnreachableTargetExitsNonZeroNamingTheBound) {
