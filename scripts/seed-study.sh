@@ -88,7 +88,8 @@ diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else pri
 # degree in φ_peak between packings, so one packing cannot tell a 2° miss.
 # The last column is the windows' mean dilatancy angle (cv_dilatancy_deg), with a
 # star per packing the run judged not at critical state (|psi| > 5 deg or phi_mob
-# drifting).
+# drifting). A dagger beside φ_peak marks each packing whose peak the run judged to
+# rest on a spike of the walls' stress (more than 2° above its 5-row running mean).
 table_row() {
   local stats
   stats=$(col "$1" theta_deg eta phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
@@ -100,6 +101,7 @@ table_row() {
       if ($4 != "") { nc++; cv += $4; cv2 += $4 * $4; if (se == "") se = $5 }
       if ($6 != "") { np++; psi += $6 }
       if (index($7, "not at critical state")) star = star "*"
+      if (index($7, "rests on a spike")) dagger = dagger "†"
     }
     function sd(k, s, s2) { return k > 1 ? sprintf("%.1f", sqrt(max0((s2 - s * s / k) / (k - 1)))) : "—" }
     function max0(x) { return x > 0 ? x : 0 }
@@ -112,7 +114,7 @@ table_row() {
         dcv = sprintf("%+.1f", cv / nc - sc)
       }
       psitxt = np > 0 ? sprintf("%.1f°", psi / np) : "—"
-      pktxt = n > 1 ? sprintf("%.1f ± %s°", mp, sd(n, pk, pk2)) : sprintf("%.1f°", mp)
+      pktxt = (n > 1 ? sprintf("%.1f ± %s°", mp, sd(n, pk, pk2)) : sprintf("%.1f°", mp)) (dagger == "" ? "" : " " dagger)
       printf "| %s° | %s | %+.1f | %s° | %s | %s | %s%s%s | %d |\n",
              sp, pktxt, mp - sp, sc, cvtxt, dcv, psitxt, (star == "" ? "" : " "), star, n
     }')
@@ -208,7 +210,7 @@ damped_means() {
   echo
   echo "## Table 2.2: dense, 100 kPa, η = 0.1, over θ"
   echo
-  echo "| θ | seed φ_peak | demcal φ_peak (± sd) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
+  echo "| θ | seed φ_peak | demcal φ_peak (± sd; † a packing whose peak rests on a spike) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.7 38.6 40.4 41.4 41.5 42.6); seed_cv=(29.0 31.3 32.0 32.6 32.6 32.6)
   i=0
@@ -219,7 +221,7 @@ damped_means() {
   echo
   echo "## Table 2.3: dense, 100 kPa, θ = 30°, over η"
   echo
-  echo "| η | seed φ_peak | demcal φ_peak (± sd) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
+  echo "| η | seed φ_peak | demcal φ_peak (± sd; † a packing whose peak rests on a spike) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
   seed_pk=(35.0 41.4 45.5 47.2); seed_cv=(27.6 32.6 37.9 40.9)
   i=0
