@@ -108,10 +108,11 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
   // ~76 kPa, UFR 0.12, Z 4.6 for hundreds of rounds, as fast as the growth loaded
   // them. The frictional stage below settles the pack.
   constexpr int kRounds = 400;
-  for (int k = 0; k < kRounds; ++k) {
+  bool jammed = false;
+  for (int k = 0; k < kRounds && !jammed; ++k) {
     grow(500, false);
     debug("prep", k);
-    if (z() >= 4.0 && std::abs(wall_pressure(w) / pressure - 1.0) < 0.35) break;
+    jammed = z() >= 4.0 && std::abs(wall_pressure(w) / pressure - 1.0) < 0.35;
   }
   // Friction and rolling on, the growth servoed to the pressure asked for: the
   // frictional network holds the load, so the pressure now follows the growth.
@@ -127,11 +128,13 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
   // for: say so rather than print them as if it were.
   unsettled.clear();
   if (k == kFrictionalRounds) {
-    char why[320];
+    char why[400];
     std::snprintf(why, sizeof why,
                   "the %zu-grain pack did not settle within %d frictional growth rounds (p %.3g kPa, asked %.3g "
-                  "within 5%%; UFR %.3g, asked < 0.05; Z %.2f): timing it as it is",
-                  n, kFrictionalRounds, wall_pressure(w) / 1e3, pressure / 1e3, unbalanced_force_ratio(w), z());
+                  "within 5%%; UFR %.3g, asked < 0.05; Z %.2f)%s: timing it as it is",
+                  n, kFrictionalRounds, wall_pressure(w) / 1e3, pressure / 1e3, unbalanced_force_ratio(w), z(),
+                  jammed ? "" : (", after a frictionless stage that did not jam within its " +
+                                 std::to_string(kRounds) + " rounds").c_str());
     unsettled = why;
   }
   w.run(3000);

@@ -302,10 +302,10 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
   for (const auto& rs : cal.surfaces)
     if (rs.on_spike > 0)
       cal.result.warnings.push_back(std::to_string(rs.on_spike) + " of the " + rs.metric + " results used from job " +
-                                    rs.job + " take phi_peak from a spike of the walls' stress that the run warned of "
+                                    rs.job + " take phi_peak from a spike of the walls' stress (" + spike_rule() + ") "
                                     "(demcal query --job " + rs.job + " shows which): the surrogate takes the spike as "
-                                    "peak strength; a target on phi_peak_smoothed_deg fits the peak of the 5-row "
-                                    "running mean instead");
+                                    "peak strength; a target on phi_peak_smoothed_deg fits the peak of the running "
+                                    "mean instead");
   for (const auto& [job, rs] : warned) {
     // The first of the task's warnings (they are joined with "; "), cut at a word.
     std::string w = rs->first_warning;

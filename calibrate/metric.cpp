@@ -1,7 +1,10 @@
 #include "metric.hpp"
 
+#include "engine/scenes/triaxial.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace demcal::calibrate {
 
@@ -46,6 +49,22 @@ std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std
   const auto b = find(spec.minus);
   if (!b) return std::nullopt;
   return *a - *b;
+}
+
+bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics) {
+  double peak = NAN, smoothed = NAN;
+  for (const auto& [name, value] : metrics) {
+    if (name == "phi_peak_deg") peak = value;
+    if (name == "phi_peak_smoothed_deg") smoothed = value;
+  }
+  return peak - smoothed > engine::TriaxialResult::kPeakTransientDeg;  // false on NaN
+}
+
+std::string spike_rule() {
+  char text[120];
+  std::snprintf(text, sizeof text, "more than %g deg above the peak of its %d-row running mean",
+                engine::TriaxialResult::kPeakTransientDeg, engine::TriaxialResult::kPeakSmoothingRows);
+  return text;
 }
 
 }  // namespace demcal::calibrate

@@ -27,5 +27,12 @@ bool is_alias(const std::string& name);
 // The value for one task, or nothing when the task lacks a stored metric it needs
 // or the value is not finite.
 std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std::pair<std::string, double>>& metrics);
+// Whether a triaxial result's phi_peak_deg rests on a spike: more than the scene's
+// TriaxialResult::kPeakTransientDeg above phi_peak_smoothed_deg, the peak of its
+// running mean. Judged from the stored values, so results stored before the scene
+// warned of it count too; false when either is missing (older results, other scenes).
+bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics);
+// "more than 2 deg above the peak of its 5-row running mean", from the same constants.
+std::string spike_rule();
 
 }  // namespace demcal::calibrate

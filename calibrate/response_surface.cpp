@@ -160,8 +160,10 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
   rs.metric = metric;
   const MetricSpec spec = metric_spec(metric);
   rs.label = spec.label;
-  const bool uses_cv = spec.plus.rfind("phi_cv", 0) == 0 || spec.minus.rfind("phi_cv", 0) == 0;
-  const bool uses_peak = spec.plus == "phi_peak_deg" || spec.minus == "phi_peak_deg";
+  // What is read from the store: phi_diff and phi_diff_deg are phi_peak_deg - phi_cv_deg.
+  const auto [plus, minus] = stored_reading(metric);
+  const bool uses_cv = plus.rfind("phi_cv", 0) == 0 || minus.rfind("phi_cv", 0) == 0;
+  const bool uses_peak = plus == "phi_peak_deg" || minus == "phi_peak_deg";
 
   struct Row {
     jobs::ResultRow r;
@@ -263,7 +265,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
         const std::string w = db::task_message(row.r.task).warning;
         if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
         if (uses_cv && w.find("not at critical state") != std::string::npos) ++rs.not_critical;
-        if (uses_peak && w.find("rests on a spike") != std::string::npos) ++rs.on_spike;
+        if (uses_peak && peak_on_a_spike(row.r.metrics)) ++rs.on_spike;
       } else {
         ++p.missing;
       }

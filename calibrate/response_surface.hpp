@@ -41,8 +41,8 @@ struct ResponseSurface {
   // Of the results used, those whose phi_cv window the run judged not at critical
   // state (still dilating, or phi_mob drifting): counted for metrics built on phi_cv.
   int not_critical = 0;
-  // Of the results used, those whose phi_peak the run judged to rest on a spike of the
-  // walls' stress: counted for metrics built on phi_peak_deg.
+  // Of the results used, those whose phi_peak rests on a spike (peak_on_a_spike):
+  // counted for metrics built on phi_peak_deg.
   int on_spike = 0;
 
   Box box() const;                   // the job grid's bounds

@@ -141,9 +141,7 @@ struct FidelityStudy {
 };
 
 // What the list of replicas whose peak rests on a spike is headed with (table and file).
-inline constexpr const char* kSpikeHeading =
-    "peak on a spike of the walls' stress (phi_peak more than 2 deg above its 5-row running mean, which "
-    "phi_peak_smoothed_deg holds: the steadier figure)";
+std::string spike_heading();
 
 // The knobs a fidelity study has (for errors and help), and a check of the
 // options that throws JobError ("--knobs", "--reference", ...) before anything is

@@ -82,7 +82,7 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
     for (const auto& f : s.failures) std::cout << "  " << f << "\n";
   }
   if (!s.spikes.empty()) {
-    std::cout << calibrate::kSpikeHeading << " (" << s.spikes.size() << "):\n";
+    std::cout << calibrate::spike_heading() << " (" << s.spikes.size() << "):\n";
     for (const auto& f : s.spikes) std::cout << "  " << f << "\n";
   }
   std::cout << s.recommendation << "\n";

@@ -251,12 +251,15 @@ TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
             std::string::npos)
       << r.out << r.err;
   EXPECT_EQ((r.out + r.err).find("of the phi_peak results used"), std::string::npos) << r.out << r.err;
-  // One result whose phi_peak rests on a spike: the phi_peak surface says so, the
-  // phi_cv one does not.
+  // One result whose phi_peak rests on a spike, judged from the stored values (a result
+  // stored before the scene warned of spikes counts too): the phi_peak surface says so,
+  // the phi_cv one does not. One 2 deg above its running mean is no spike.
   {
     db::Connection c(db, /*read_only=*/false);
-    c.exec("UPDATE tasks SET error = 'warning: phi_peak 46.33 deg (at eps1 0.103) rests on a spike of the walls'' "
-           "stress ratio: the running mean over 0.005 of strain peaks at 38.84 deg' WHERE id = 6");
+    c.exec("INSERT INTO metrics(task_id, name, value) SELECT task_id, 'phi_peak_smoothed_deg', value - 5 FROM metrics "
+           "WHERE task_id = 6 AND name = 'phi_peak_deg'");
+    c.exec("INSERT INTO metrics(task_id, name, value) SELECT task_id, 'phi_peak_smoothed_deg', value - 2 FROM metrics "
+           "WHERE task_id = 7 AND name = 'phi_peak_deg'");
     db::Store s(db, true);
     EXPECT_EQ(calibrate::gather(s, "grid", "phi_peak").on_spike, 1);
     EXPECT_EQ(calibrate::gather(s, "grid", "phi_diff").on_spike, 1);

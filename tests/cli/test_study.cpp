@@ -217,7 +217,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
                             "listed below"),
             std::string::npos)
       << spiked.out;
-  EXPECT_NE(spiked.out.find(std::string(demcal::calibrate::kSpikeHeading) + " (1):\n  dt=0.15 seed 2: phi_peak "),
+  EXPECT_NE(spiked.out.find(demcal::calibrate::spike_heading() + " (1):\n  dt=0.15 seed 2: phi_peak "),
             std::string::npos)
       << spiked.out;
   EXPECT_NE(slurp(d.file("f/fidelity-dt_recommendation.txt")).find("  dt=0.15 seed 2: phi_peak "), std::string::npos);

@@ -615,6 +615,11 @@ TEST(PeakStrength, APeakOnASpikeOfTheWallStressIsWarned) {
   judge_peak(cfg, small);
   ASSERT_EQ(small.outcome.warnings.size(), 1u);
   EXPECT_EQ(small.outcome.warnings.front().find("interior"), std::string::npos) << small.outcome.warnings.front();
+  small.outcome.warnings.clear();
+  small.phi_peak_interior_deg = 38.22;  // a value from 9 grains is no measurement either
+  judge_peak(cfg, small);
+  ASSERT_EQ(small.outcome.warnings.size(), 1u);
+  EXPECT_EQ(small.outcome.warnings.front().find("interior"), std::string::npos) << small.outcome.warnings.front();
   // Rows every N steps: the span is said in rows.
   cfg.sample_steps = 200;
   EXPECT_NE(judged(46.33, 38.84).outcome.warnings.front().find("over 5 rows"), std::string::npos);
