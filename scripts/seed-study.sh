@@ -74,10 +74,13 @@ query() {
   "$DEMCAL" query --job "$job" --db "$DB" --format csv
 }
 # col CSV NAME...: prints the named columns (first occurrence of each name), tab separated.
+# The last column (warning) is the only one whose text holds commas: it is the rest
+# of the line, not the text up to its first comma.
 col() {
   local csv=$1; shift
-  awk -F, -v want="$*" 'NR == 1 { n = split(want, w, " "); for (k = 1; k <= n; ++k) for (i = NF; i >= 1; --i) if ($i == w[k]) c[k] = i; next }
-    { line = ""; for (k = 1; k <= n; ++k) line = line (k > 1 ? "\t" : "") (c[k] ? $(c[k]) : ""); print line }' "$csv"
+  awk -F, -v want="$*" 'NR == 1 { last = NF; n = split(want, w, " "); for (k = 1; k <= n; ++k) for (i = NF; i >= 1; --i) if ($i == w[k]) c[k] = i; next }
+    function rest(i,   s, j) { s = $i; for (j = i + 1; j <= NF; ++j) s = s "," $j; return s }
+    { line = ""; for (k = 1; k <= n; ++k) line = line (k > 1 ? "\t" : "") (c[k] ? (c[k] == last ? rest(c[k]) : $(c[k])) : ""); print line }' "$csv"
 }
 fmt() { awk -v x="$1" 'BEGIN { if (x == "") printf "failed"; else printf "%.1f", x }'; }
 diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else printf "%+.1f", a - b }'; }
@@ -92,7 +95,7 @@ diff_of() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "") printf "—"; else pri
 # rest on a spike of the walls' stress (more than 2° above its 5-row running mean).
 table_row() {
   local stats
-  stats=$(col "$1" theta_deg eta phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning |
+  stats=$(col "$1" theta_deg eta phi_peak_deg phi_cv_deg phi_cv_se_deg cv_dilatancy_deg warning phi_peak_smoothed_deg |
           awk -F'\t' -v t="$3" -v e="$4" -v sp="$5" -v sc="$6" '
     # Each column counts its own packings: a phi_cv or psi left empty (no sample in
     # the window) is missing, not 0.
@@ -101,7 +104,9 @@ table_row() {
       if ($4 != "") { nc++; cv += $4; cv2 += $4 * $4; if (se == "") se = $5 }
       if ($6 != "") { np++; psi += $6 }
       if (index($7, "not at critical state")) star = star "*"
-      if (index($7, "rests on a spike")) dagger = dagger "†"
+      # The rule of the scene (TriaxialResult::kPeakTransientDeg), from the stored values:
+      # results stored before the scene warned of spikes are judged alike.
+      if ($3 != "" && $8 != "" && $3 - $8 > 2) dagger = dagger "†"
     }
     function sd(k, s, s2) { return k > 1 ? sprintf("%.1f", sqrt(max0((s2 - s * s / k) / (k - 1)))) : "—" }
     function max0(x) { return x > 0 ? x : 0 }
