@@ -73,12 +73,13 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
   // Growth must stay quasi-static: an impact at the growth speed v = r*rate/dt
   // pushes with v*sqrt(Kn m), which must stay well below the target contact force
   // p d^2. Fast until the pack jams (Z >= 4), then slow and servoed on the stress.
+  auto z = [&] { return 2.0 * coordination(w).contacts / n; };
   // Once friction is on the pack is jammed whatever its Z (frictional spheres jam
   // below 4): the servo alone sets the rate.
   auto grow = [&](long steps, bool frictional) {
     const double slow = 0.05 * pressure * 2.25e-6 * w.dt() / (1e-3 * std::sqrt(full.kn * 5.2));
     for (long s = 0; s < steps; s += 50) {
-      const bool jammed = frictional || 2.0 * coordination(w).contacts / n >= 4.0;
+      const bool jammed = frictional || z() >= 4.0;
       const double err = 1.0 - wall_pressure(w) / pressure;
       const double rate = jammed ? std::clamp(slow * err, -slow, slow) : 1e-5;
       Particles& q = w.particles();
@@ -97,7 +98,6 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
       w.run(50);
     }
   };
-  auto z = [&] { return 2.0 * coordination(w).contacts / n; };
   auto debug = [&](const char* stage, int k) {
     if (getenv("BENCH_DEBUG"))
       std::fprintf(stderr, "  %s %d: p %.3g ufr %.3g z %.2f\n", stage, k, wall_pressure(w), unbalanced_force_ratio(w),
@@ -140,8 +140,7 @@ World dense_pack(std::size_t n, int threads, bool rolling, double pressure, std:
   w.run(3000);
   w.set_local_damping(0.0);
   if (getenv("BENCH_DEBUG"))
-    std::fprintf(stderr, "  with friction: p %.3g ufr %.3g z %.2f\n", wall_pressure(w), unbalanced_force_ratio(w),
-                 2.0 * coordination(w).contacts / n);
+    std::fprintf(stderr, "  with friction: p %.3g ufr %.3g z %.2f\n", wall_pressure(w), unbalanced_force_ratio(w), z());
   return w;
 }
 

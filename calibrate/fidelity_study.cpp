@@ -29,9 +29,6 @@ struct FidelityDef {
   std::string name, scene;
   nlohmann::json material, base;      // base: the scene section at the baseline
   std::vector<std::string> metrics;   // error metrics
-  // Triaxial: a replica whose phi_peak rests on a spike (peak_on_a_spike) is marked
-  // and listed (one spike can set a setting's mean and spread, and so a verdict).
-  bool counts_spikes = false;
   std::vector<KnobDef> knobs;
 };
 
@@ -47,7 +44,6 @@ FidelityDef fidelity_def(const std::string& name, bool quick) {
   if (name == "fidelity") {
     d.scene = "triaxial";
     d.metrics = {"phi_peak_deg", "phi_cv_deg"};
-    d.counts_spikes = true;
     // The baseline is the seed study's (examples/seed-study): dense, 100 kPa,
     // theta 30 deg, eta 0.1, 500 grains, 3e-4 /s, so its tasks are shared with it.
     if (!quick) {
@@ -488,7 +484,9 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           if (std::isfinite(wall)) failed_wall.push_back(wall);
           continue;
         }
-        if (d.counts_spikes && peak_on_a_spike(r.metrics)) {
+        // Marked and listed: one spike can set a setting's mean, spread and verdict
+        // (never for repose, whose results hold no peak).
+        if (peak_on_a_spike(r.metrics)) {
           const std::string spike = seed + ": phi_peak " + fmt(metric(r, "phi_peak_deg"), 4) +
                                     " deg, the running mean's peak " + fmt(metric(r, "phi_peak_smoothed_deg"), 4) +
                                     " deg";
@@ -608,7 +606,6 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   s.files.push_back(rec.string());
   return s;
 }
-
 
 std::string spike_heading() {
   return "peak on a spike of the walls' stress (phi_peak " + spike_rule() +

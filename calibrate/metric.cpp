@@ -57,7 +57,7 @@ bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics)
     if (name == "phi_peak_deg") peak = value;
     if (name == "phi_peak_smoothed_deg") smoothed = value;
   }
-  return peak - smoothed > engine::TriaxialResult::kPeakTransientDeg;  // false on NaN
+  return engine::TriaxialResult::peak_on_a_spike(peak, smoothed);
 }
 
 std::string spike_rule() {

@@ -463,8 +463,8 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
 // kinetic energy up sevenfold as the chain gave way) sets the maximum of the rows
 // without being the material's peak strength.
 void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
-  const double excess = res.phi_peak_deg - res.phi_peak_smoothed_deg;
-  if (!(excess > TriaxialResult::kPeakTransientDeg)) return;  // NaN: too few rows to tell
+  // A NaN smoothed peak (too few rows) tells nothing.
+  if (!TriaxialResult::peak_on_a_spike(res.phi_peak_deg, res.phi_peak_smoothed_deg)) return;
   const std::string span = cfg.sample_steps > 0 ? std::to_string(TriaxialResult::kPeakSmoothingRows) + " rows"
                                                 : fmt(TriaxialResult::kPeakSmoothingRows * cfg.sample_strain) +
                                                       " of strain";

@@ -152,6 +152,10 @@ struct TriaxialResult {
   // force chain against a wall that loads and buckles), not on the stress-strain
   // curve's hump: the run warns.
   static constexpr double kPeakTransientDeg = 2.0;
+  // The rule, for a result here and for stored ones (calibrate): false on NaN.
+  static bool peak_on_a_spike(double peak_deg, double smoothed_deg) {
+    return peak_deg - smoothed_deg > kPeakTransientDeg;
+  }
   // phi_cv: the angle of the mean stress ratio over the window; its standard error
   // counts the rows' correlation (integrated autocorrelation time): the noise of this
   // run only, not the scatter between packings (replicas measure that).
