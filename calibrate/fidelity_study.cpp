@@ -37,13 +37,16 @@ nlohmann::json seed_material() {
           {"diameter", {{"min", 1e-3}, {"max", 2e-3}}}};
 }
 
-FidelityDef fidelity_def(const std::string& name, bool quick) {
+FidelityDef fidelity_def(const std::string& name, bool quick, bool smoothed_peak) {
+  if (smoothed_peak && name != "fidelity")
+    throw JobError("--peak", "study " + name + " has no peak strength to smooth: --peak applies to the (triaxial) "
+                             "fidelity study only");
   FidelityDef d;
   d.name = name;
   d.material = seed_material();
   if (name == "fidelity") {
     d.scene = "triaxial";
-    d.metrics = {"phi_peak_deg", "phi_cv_deg"};
+    d.metrics = {smoothed_peak ? "phi_peak_smoothed_deg" : "phi_peak_deg", "phi_cv_deg"};
     // The baseline is the seed study's (examples/seed-study): dense, 100 kPa,
     // theta 30 deg, eta 0.1, 500 grains, 3e-4 /s, so its tasks are shared with it.
     if (!quick) {
@@ -218,6 +221,7 @@ void mark_fidelity_pareto(std::vector<FidelityPoint>& pts) {
 
 std::string short_metric(const std::string& m) {
   if (m == "phi_peak_deg") return "phi_peak";
+  if (m == "phi_peak_smoothed_deg") return "phi_peak (running mean)";
   if (m == "phi_cv_deg") return "phi_cv";
   if (m == "repose_deg") return "repose angle";
   return m;
@@ -235,7 +239,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   }
   if (wmax <= 0) wmin = wmax = 1.0;
   const double ceiling = top * 1.15;  // failed points are drawn here
-  const std::string stem = s.name + "_" + k.name;
+  const std::string stem = s.stem + "_" + k.name;
   const fs::path data = dir / (stem + ".dat"), script = dir / (stem + ".gp"), png = dir / (stem + ".png");
   // Blocks: 0 settings with an error (wall, then error and sd per metric, label),
   // 1 Pareto front by wall time, 2 failed settings, 3 the recommended setting.
@@ -366,7 +370,7 @@ void write_fidelity_csv(const FidelityStudy& s, const fs::path& csv) {
 
 std::vector<std::string> fidelity_knob_names(const std::string& name) {
   std::vector<std::string> out;
-  for (const auto& k : fidelity_def(name, false).knobs) out.push_back(k.name);
+  for (const auto& k : fidelity_def(name, false, false).knobs) out.push_back(k.name);
   return out;
 }
 
@@ -396,15 +400,16 @@ std::vector<std::vector<Job>> knob_job_sets(const FidelityDef& d, const std::vec
 }
 
 void check_fidelity_options(const std::string& name, const StudyOptions& o) {
-  const FidelityDef d = fidelity_def(name, o.quick);
+  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
   knob_job_sets(d, selected_knobs(d, o), o, name, effective_replicas(o));
 }
 
 FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, const StudyOptions& o) {
-  const FidelityDef d = fidelity_def(name, o.quick);
+  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
   const std::vector<KnobDef> knobs = selected_knobs(d, o);
   FidelityStudy s;
   s.name = name;
+  s.stem = name + (o.smoothed_peak ? "-smoothed-peak" : "");
   s.scene = d.scene;
   s.metrics = d.metrics;
   s.tolerance = o.tolerance > 0 ? o.tolerance : 2.0;
@@ -560,14 +565,14 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
         spiked += (spiked.empty() ? "" : ", ") + p.label + (p.reference ? " (the reference)" : "") + ": " +
                   std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
     if (!spiked.empty())
-      rec << "; phi_peak rests on a spike of the walls' stress in " << spiked
-          << " replica(s), listed below";
+      rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
+          << (o.smoothed_peak ? " (judged here by the running mean's peak, which the spike does not move)" : "");
     k.recommendation = rec.str();
     s.knobs.push_back(std::move(k));
   }
 
   std::ostringstream summary;
-  summary << "recommended settings (" << s.name << ", one knob at a time around the baseline, tolerance "
+  summary << "recommended settings (" << s.name << (o.smoothed_peak ? ", phi_peak by its running mean" : "") << ", one knob at a time around the baseline, tolerance "
           << fmt(s.tolerance) << " deg):";
   bool any = false;
   for (const auto& k : s.knobs) {
@@ -582,7 +587,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   }
   // A run of some knobs names its table after them, so that runs of other knobs
   // into the same folder keep theirs (the charts are per knob already).
-  std::string stem = s.name;
+  std::string stem = s.stem;
   if (knobs.size() < d.knobs.size())
     for (const auto& k : knobs) stem += "-" + k.name;
   const fs::path csv = dir / (stem + ".csv");

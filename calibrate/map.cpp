@@ -157,9 +157,11 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
       full << "\n";
       shown << "\n";
     }
-    std::ofstream pts(path("points.dat")), ref(path("refine.dat")), hol(path("holes.dat"));
+    std::ofstream pts(path("points.dat")), ref(path("refine.dat")), hol(path("holes.dat")), spk(path("spiked.dat"));
     for (const auto& p : rs.points)
       if (!p.hole()) (p.refine ? ref : pts) << num(p.theta) << " " << num(p.eta) << "\n";
+    for (const auto& p : rs.points)
+      if (p.spiked > 0) spk << num(p.theta) << " " << num(p.eta) << "\n";
     for (const auto& h : holes) hol << num(h.first) << " " << num(h.second) << "\n";
     if (holes.empty()) hol << "NaN NaN\n";
     if (r.overlay) {
@@ -254,6 +256,11 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     << " using 1:2:(0) with lines lc rgb 'black' lw 1 title 'iso-lines', \\\n  " << quoted(path("points.dat"))
     << " using 1:2:(0) with points pt 7 ps 0.9 lc rgb 'black' title 'grid points', \\\n  " << quoted(path("holes.dat"))
     << " using 1:2:(0) with points pt 2 ps 2.5 lw 3 lc rgb 'red' title 'holes (failed or missing)'";
+  // A triangle over the grid point: the value drawn there takes phi_peak from a one-row
+  // spike of the walls' stress in at least one replica.
+  if (fs::file_size(path("spiked.dat")) > 0)
+    g << ", \\\n  " << quoted(path("spiked.dat"))
+      << " using 1:2:(0) with points pt 8 ps 2.2 lw 2 lc rgb '#d06000' title 'phi_peak on a spike (a replica)' noenhanced";
   if (fs::file_size(path("refine.dat")) > 0)
     g << ", \\\n  " << quoted(path("refine.dat")) << " using 1:2:(0) with points pt 6 ps 1.2 lw 2 lc rgb 'black' title 'refinement runs'";
   if (r.overlay)

@@ -22,6 +22,7 @@ struct GridPoint {
   std::vector<std::int64_t> tasks;  // the task each value came from (empty for synthetic surfaces)
   double mean = kNaN, sd = kNaN, se = kNaN;  // sd, se: NaN with fewer than 2 replicas
   int failed = 0, unfinished = 0, missing = 0;  // tasks without a value, by reason
+  int spiked = 0;              // values whose phi_peak rests on a spike (metrics built on phi_peak_deg)
   bool refine = false;         // added by `demcal fit --refine`, not part of the job's grid
   int n() const { return static_cast<int>(values.size()); }
   bool hole() const { return values.empty(); }

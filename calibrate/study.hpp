@@ -41,6 +41,10 @@ struct StudyOptions {
   int replicas = 0;                          // packings (seeds 1..R) per setting; 0: 3 (quick: 1)
   std::vector<std::string> knobs;            // knobs to run; empty: all
   std::map<std::string, double> reference;   // knob -> reference setting; absent: the knob's most expensive
+  // fidelity (triaxial) only: judge phi_peak by phi_peak_smoothed_deg, the peak of its
+  // running mean, which a one-row spike of the walls' stress does not move. The tasks
+  // are the same; the charts, CSV and recommendation are named <name>-smoothed-peak.
+  bool smoothed_peak = false;
   bool terminal = false;
   std::ostream* log = nullptr;
 };
@@ -126,6 +130,7 @@ struct FidelityKnob {
 
 struct FidelityStudy {
   std::string name;              // "fidelity" | "repose-fidelity"
+  std::string stem;              // what its charts, CSV and recommendation are named from
   std::string scene;
   std::vector<std::string> metrics;
   double tolerance = 0;

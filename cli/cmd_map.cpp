@@ -61,6 +61,13 @@ void add_map(CLI::App& app, int& exit_code) {
         if (p.hole() && !p.refine)
           std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.failed << " failed, " << p.unfinished
                     << " not finished, " << p.missing << " without the metric)\n";
+      for (const auto& p : rs.points)
+        if (p.spiked > 0)
+          std::cout << "peak on a spike: theta = " << p.theta << ", eta = " << p.eta << " (" << p.spiked << " of "
+                    << p.n() << " replica(s))\n";
+      if (rs.on_spike > 0)
+        std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
+                  << "mean's peak, which the spike does not move)\n";
       if (overlay)
         std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
                   << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";

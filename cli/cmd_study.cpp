@@ -29,6 +29,7 @@ struct StudyArgs {
   double tolerance = 0.0;
   int replicas = 0;
   std::vector<std::string> knobs, references;
+  std::string peak = "raw";
 };
 
 bool is_fidelity(const std::string& name) { return name == "fidelity" || name == "repose-fidelity"; }
@@ -52,7 +53,9 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
   db::Store store(a.db);
   const calibrate::FidelityStudy s = calibrate::run_fidelity_study(store, a.name, o);
   std::cout << "study " << s.name << " (" << s.scene << "), baseline " << s.baseline << "; " << s.replicas
-            << " replica(s) per setting\n";
+            << " replica(s) per setting"
+            << (o.smoothed_peak ? "; phi_peak judged by the peak of its running mean (phi_peak_smoothed_deg)" : "")
+            << "\n";
   for (const auto& f : s.job_files) std::cout << "job file " << f << "\n";
   std::cout << s.tasks << " tasks in " << a.db << " (" << s.reused << " reused, " << s.ran << " run now)\n";
   for (const auto& k : s.knobs) {
@@ -104,10 +107,13 @@ int study(const StudyArgs& a) {
   o.tolerance = a.tolerance;
   o.replicas = a.replicas;
   o.knobs = a.knobs;
+  o.smoothed_peak = a.peak == "smoothed";
   o.terminal = isatty(STDERR_FILENO) != 0;
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  if (!is_fidelity(a.name) && o.smoothed_peak)
+    throw jobs::JobError("--peak", "applies to the fidelity study only (the triaxial peak strength)");
   if (a.name == "grazing" && a.tolerance > 0)
     throw jobs::JobError("--tolerance", "the grazing study has no tolerance: any energy gained is reported");
   if (a.name == "grazing" && a.db_given)
@@ -202,6 +208,12 @@ void add_study(CLI::App& app, int& exit_code) {
                   "fidelity studies: KNOB=VALUE, the setting errors are measured against (default: the knob's most "
                   "expensive setting); a value not in the knob's list is added to it")
       ->delimiter(',');
+  cmd->add_option("--peak", a->peak,
+                  "fidelity: the phi_peak the errors are taken on: raw (phi_peak_deg, the design's definition) or "
+                  "smoothed (phi_peak_smoothed_deg, the peak of its running mean over 5 rows, which a one-row spike "
+                  "of the walls' stress does not move); same tasks, charts and files named fidelity-smoothed-peak")
+      ->check(CLI::IsMember({"raw", "smoothed"}))
+      ->capture_default_str();
   cmd->callback([a, cmd, &exit_code] {
     a->db_given = cmd->count("--db") > 0;
     exit_code = guarded("", [&] { return study(*a); });

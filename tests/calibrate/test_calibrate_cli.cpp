@@ -111,6 +111,44 @@ TEST(CalibrateMap, AMetricWithOneValueEverywhereDrawsAFlatMap) {
   }
 }
 
+// A grid point one of whose replicas takes phi_peak from a spike (5 deg above its
+// running mean's peak) is marked on the phi_peak and phi_diff maps and listed with
+// its replica count; the phi_cv map has nothing to mark.
+TEST(CalibrateMap, APointWhosePeakRestsOnASpikeIsMarkedAndListed) {
+  TempDir d;
+  const std::string db = make_db(d, /*with_holes=*/false);
+  {
+    db::Connection c(db, /*read_only=*/false);
+    c.exec("INSERT INTO metrics(task_id, name, value) SELECT task_id, 'phi_peak_smoothed_deg', value - 5 FROM metrics "
+           "WHERE task_id = 6 AND name = 'phi_peak_deg'");
+  }
+  double th = 0, et = 0;
+  {
+    db::Store s(db, true);
+    const auto rs = calibrate::gather(s, "grid", "phi_peak");
+    int marked = 0;
+    for (const auto& p : rs.points)
+      if (p.spiked > 0) {
+        ++marked, th = p.theta, et = p.eta;
+        EXPECT_EQ(p.spiked, 1);
+      }
+    ASSERT_EQ(marked, 1);
+  }
+  std::ostringstream line;
+  line << "peak on a spike: theta = " << th << ", eta = " << et << " (1 of 2 replica(s))";
+  for (const char* metric : {"phi_peak", "phi_diff"}) {
+    const auto r = run_demcal({"map", "--metric", metric, "--out", "m.svg"}, d.path.string());
+    ASSERT_EQ(r.rc, 0) << r.out << r.err;
+    EXPECT_NE(r.out.find(line.str()), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("--metric phi_peak_smoothed_deg maps the running mean's peak"), std::string::npos) << r.out;
+    EXPECT_NE(slurp(d.file("m.svg")).find("phi_peak on a spike (a replica)"), std::string::npos) << metric;
+  }
+  const auto cv = run_demcal({"map", "--metric", "phi_cv", "--out", "m.svg"}, d.path.string());
+  ASSERT_EQ(cv.rc, 0) << cv.out << cv.err;
+  EXPECT_EQ(cv.out.find("peak on a spike"), std::string::npos) << cv.out;
+  EXPECT_EQ(slurp(d.file("m.svg")).find("phi_peak on a spike"), std::string::npos);
+}
+
 TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   TempDir d;
   const std::string db = make_db(d);

@@ -4,8 +4,10 @@
 #include "calibrate/study.hpp"
 #include "cli_util.hpp"
 
+#include <cmath>
 #include <fcntl.h>
 #include <sqlite3.h>
+#include <sstream>
 #include <sys/file.h>
 #include <unistd.h>
 
@@ -223,6 +225,42 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_NE(slurp(d.file("f/fidelity-dt_recommendation.txt")).find("  dt=0.15 seed 2: phi_peak "), std::string::npos);
   EXPECT_NE(slurp(d.file("f/fidelity-dt.csv")).find(",1,\""), std::string::npos);  // peak_spikes of the 0.15 row
   EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"0.15 (ref) (1/2 peak on a spike)\""), std::string::npos);
+
+  // Judged by the running mean's peak instead: the same tasks, files of its own, and
+  // the raised replica no longer moves the reference (its raw mean is 5/2 deg higher).
+  std::vector<std::string> smoothed_args = args;
+  smoothed_args.insert(smoothed_args.end(), {"--peak", "smoothed"});
+  const std::string raw_recommendation = slurp(d.file("f/fidelity-dt_recommendation.txt"));
+  const Result sm = run_demcal(smoothed_args, d.path.string());
+  ASSERT_EQ(sm.rc, 0) << sm.err;
+  EXPECT_NE(sm.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << sm.out;
+  EXPECT_NE(sm.out.find("phi_peak judged by the peak of its running mean"), std::string::npos) << sm.out;
+  EXPECT_NE(sm.out.find("(judged here by the running mean's peak, which the spike does not move)"), std::string::npos)
+      << sm.out;
+  EXPECT_NE(sm.out.find("recommended settings (fidelity, phi_peak by its running mean,"), std::string::npos) << sm.out;
+  for (const char* f : {"fidelity-smoothed-peak_dt.png", "fidelity-smoothed-peak-dt.csv",
+                        "fidelity-smoothed-peak-dt_recommendation.txt"})
+    EXPECT_TRUE(fs::exists(d.path / "f" / f)) << f;
+  EXPECT_EQ(slurp(d.file("f/fidelity-dt_recommendation.txt")), raw_recommendation);  // the raw run's files kept
+  const auto reference_mean = [&](const std::string& csv_name, const std::string& column) {
+    std::istringstream in(slurp(d.file("f/" + csv_name)));
+    std::string line, cell;
+    std::getline(in, line);
+    std::istringstream head(line);
+    int col = -1;
+    for (int i = 0; std::getline(head, cell, ','); ++i)
+      if (cell == column) col = i;
+    while (std::getline(in, line)) {
+      if (line.rfind("dt,0.15,", 0) != 0) continue;
+      std::istringstream row(line);
+      for (int i = 0; std::getline(row, cell, ','); ++i)
+        if (i == col) return std::stod(cell);
+    }
+    return std::nan("");
+  };
+  const double raw_ref = reference_mean("fidelity-dt.csv", "phi_peak_deg_mean");
+  const double smoothed_ref = reference_mean("fidelity-smoothed-peak-dt.csv", "phi_peak_smoothed_deg_mean");
+  EXPECT_NEAR(raw_ref - smoothed_ref, 2.5, 1e-3) << raw_ref << " " << smoothed_ref;
 }
 
 TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
@@ -240,6 +278,15 @@ TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
   EXPECT_NE(r.err.find("--reference"), std::string::npos) << r.err;
   r = run_demcal({"study", "timestep", "--knobs", "dt"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  // A smoothed peak where there is no peak strength: named, refused before anything is written.
+  for (const char* study : {"repose-fidelity", "timestep"}) {
+    r = run_demcal({"study", study, "--quick", "--peak", "smoothed"}, d.path.string());
+    EXPECT_EQ(r.rc, 2) << study;
+    EXPECT_NE(r.err.find("--peak"), std::string::npos) << r.err;
+  }
+  r = run_demcal({"study", "fidelity", "--quick", "--peak", "median"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--peak"), std::string::npos) << r.err;
   // A reference the scene refuses is named as the user wrote it, not as the grid path
   // of the study's own job, and refused before the database exists.
   r = run_demcal({"study", "fidelity", "--reference", "dt=1e9"}, d.path.string());
