@@ -299,7 +299,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   {
     std::ofstream g(script);
     g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
-      << "set title " << gnuplot_quoted("demcal study " + s.name + ": " + k.what + " against wall time (" +
+      << "set title " << gnuplot_quoted("demcal study " + s.name + (s.stem != s.name ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
                                         std::to_string(s.replicas) + " replicas per setting)") << " noenhanced\n"
       << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
       << "set ylabel '|metric - reference| [deg]; bars: replica standard deviation' noenhanced\n"
@@ -572,8 +572,8 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   }
 
   std::ostringstream summary;
-  summary << "recommended settings (" << s.name << (o.smoothed_peak ? ", phi_peak by its running mean" : "") << ", one knob at a time around the baseline, tolerance "
-          << fmt(s.tolerance) << " deg):";
+  summary << "recommended settings (" << s.name << (o.smoothed_peak ? ", phi_peak by its running mean" : "")
+          << ", one knob at a time around the baseline, tolerance " << fmt(s.tolerance) << " deg):";
   bool any = false;
   for (const auto& k : s.knobs) {
     summary << (any ? ", " : " ") << k.name << " " << (std::isfinite(k.recommended) ? label_of(k.recommended) : "none");
