@@ -299,7 +299,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   {
     std::ofstream g(script);
     g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
-      << "set title " << gnuplot_quoted("demcal study " + s.name + (s.stem != s.name ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
+      << "set title " << gnuplot_quoted("demcal study " + s.name + (s.smoothed_peak ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
                                         std::to_string(s.replicas) + " replicas per setting)") << " noenhanced\n"
       << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
       << "set ylabel '|metric - reference| [deg]; bars: replica standard deviation' noenhanced\n"
@@ -410,6 +410,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   FidelityStudy s;
   s.name = name;
   s.stem = name + (o.smoothed_peak ? "-smoothed-peak" : "");
+  s.smoothed_peak = o.smoothed_peak;
   s.scene = d.scene;
   s.metrics = d.metrics;
   s.tolerance = o.tolerance > 0 ? o.tolerance : 2.0;
@@ -566,7 +567,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
                   std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
     if (!spiked.empty())
       rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
-          << (o.smoothed_peak ? " (judged here by the running mean's peak, which the spike does not move)" : "");
+          << (o.smoothed_peak ? " (judged here by the running mean's peak, which a spike of a row or two barely moves)" : "");
     k.recommendation = rec.str();
     s.knobs.push_back(std::move(k));
   }

@@ -223,11 +223,13 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
 
   jobs::ImageFile image(r.out);
   std::ofstream g(path("map.gp"));
-  char title[400];
-  std::snprintf(title, sizeof title, "%s, job %s: %d points with data, %d holes; %s", rs.label.c_str(), rs.job.c_str(),
-                rs.with_data(), rs.holes(), s.describe().c_str());
+  // Two lines: on one, a long metric label and surrogate ran past the 900-pixel width.
+  char title[300];
+  std::snprintf(title, sizeof title, "%s, job %s: %d points with data, %d holes", rs.label.c_str(), rs.job.c_str(),
+                rs.with_data(), rs.holes());
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
-    << "set title " << quoted(r.title.empty() ? title : r.title) << " noenhanced font ',10'\n"
+    << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe()) : quoted(r.title))
+    << " noenhanced font ',10' offset 0,0.6\n"
     << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel "
     << quoted(flat ? rs.label + ": " + num(zlo) + " everywhere" : rs.label) << " noenhanced\n"
     << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
@@ -256,11 +258,11 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     << " using 1:2:(0) with lines lc rgb 'black' lw 1 title 'iso-lines', \\\n  " << quoted(path("points.dat"))
     << " using 1:2:(0) with points pt 7 ps 0.9 lc rgb 'black' title 'grid points', \\\n  " << quoted(path("holes.dat"))
     << " using 1:2:(0) with points pt 2 ps 2.5 lw 3 lc rgb 'red' title 'holes (failed or missing)'";
-  // A triangle over the grid point: the value drawn there takes phi_peak from a one-row
-  // spike of the walls' stress in at least one replica.
+  // A triangle over the grid point: the value drawn there takes phi_peak from a spike
+  // (a row or two) of the walls' stress in at least one replica.
   if (fs::file_size(path("spiked.dat")) > 0)
     g << ", \\\n  " << quoted(path("spiked.dat"))
-      << " using 1:2:(0) with points pt 8 ps 2.2 lw 2 lc rgb '#d06000' title 'phi_peak on a spike (a replica)' noenhanced";
+      << " using 1:2:(0) with points pt 8 ps 2.2 lw 2 lc rgb '#d06000' title 'phi_peak on a spike (in a replica)' noenhanced";
   if (fs::file_size(path("refine.dat")) > 0)
     g << ", \\\n  " << quoted(path("refine.dat")) << " using 1:2:(0) with points pt 6 ps 1.2 lw 2 lc rgb 'black' title 'refinement runs'";
   if (r.overlay)

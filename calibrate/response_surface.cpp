@@ -265,7 +265,10 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
         const std::string w = db::task_message(row.r.task).warning;
         if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
         if (uses_cv && w.find("not at critical state") != std::string::npos) ++rs.not_critical;
-        if (uses_peak && peak_on_a_spike(row.r.metrics)) ++rs.on_spike, ++p.spiked;
+        if (uses_peak && peak_on_a_spike(row.r.metrics)) {
+          ++rs.on_spike;
+          ++p.spiked;
+        }
       } else {
         ++p.missing;
       }

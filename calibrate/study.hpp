@@ -42,7 +42,7 @@ struct StudyOptions {
   std::vector<std::string> knobs;            // knobs to run; empty: all
   std::map<std::string, double> reference;   // knob -> reference setting; absent: the knob's most expensive
   // fidelity (triaxial) only: judge phi_peak by phi_peak_smoothed_deg, the peak of its
-  // running mean, which a one-row spike of the walls' stress does not move. The tasks
+  // running mean, which a spike of a row or two in the walls' stress barely moves. The tasks
   // are the same; the charts, CSV and recommendation are named <name>-smoothed-peak.
   bool smoothed_peak = false;
   bool terminal = false;
@@ -131,6 +131,7 @@ struct FidelityKnob {
 struct FidelityStudy {
   std::string name;              // "fidelity" | "repose-fidelity"
   std::string stem;              // what its charts, CSV and recommendation are named from
+  bool smoothed_peak = false;    // phi_peak errors taken on phi_peak_smoothed_deg
   std::string scene;
   std::vector<std::string> metrics;
   double tolerance = 0;

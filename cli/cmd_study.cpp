@@ -24,6 +24,7 @@ namespace {
 struct StudyArgs {
   std::string name, db = "demcal.db", out;
   bool db_given = false;
+  bool peak_given = false;  // even as raw: the other studies have no peak to judge
   bool quick = false;
   int workers = 0;
   double tolerance = 0.0;
@@ -112,8 +113,9 @@ int study(const StudyArgs& a) {
   o.log = &std::cerr;
   if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
     throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
-  if (!is_fidelity(a.name) && o.smoothed_peak)
-    throw jobs::JobError("--peak", "applies to the fidelity study only (the triaxial peak strength)");
+  if (a.name != "fidelity" && a.peak_given)
+    throw jobs::JobError("--peak", "study " + a.name + " has no peak strength to judge: --peak applies to the (triaxial) "
+                                   "fidelity study only");
   if (a.name == "grazing" && a.tolerance > 0)
     throw jobs::JobError("--tolerance", "the grazing study has no tolerance: any energy gained is reported");
   if (a.name == "grazing" && a.db_given)
@@ -210,12 +212,14 @@ void add_study(CLI::App& app, int& exit_code) {
       ->delimiter(',');
   cmd->add_option("--peak", a->peak,
                   "fidelity: the phi_peak the errors are taken on: raw (phi_peak_deg, the design's definition) or "
-                  "smoothed (phi_peak_smoothed_deg, the peak of its running mean over 5 rows, which a one-row spike "
-                  "of the walls' stress does not move); same tasks, charts and files named fidelity-smoothed-peak")
+                  "smoothed (phi_peak_smoothed_deg, the peak of its running mean over 5 rows, which a spike of a row "
+                  "or two in the walls' stress barely moves); the same tasks, with the charts, CSV and "
+                  "recommendation named fidelity-smoothed-peak")
       ->check(CLI::IsMember({"raw", "smoothed"}))
       ->capture_default_str();
   cmd->callback([a, cmd, &exit_code] {
     a->db_given = cmd->count("--db") > 0;
+    a->peak_given = cmd->count("--peak") > 0;
     exit_code = guarded("", [&] { return study(*a); });
   });
 }

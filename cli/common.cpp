@@ -4,6 +4,7 @@
 #include "jobs/job_error.hpp"
 
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -130,6 +131,17 @@ const CLI::Validator kPositiveFinite(
       return v && *v > 0 ? std::string() : "must be a positive finite number, got \"" + text + "\"";
     },
     "NUMBER > 0", "positive finite number");
+
+// Whole text, no sign, within int64: CLI11 would clamp 99999999999999999999 to
+// INT64_MAX and the error would name an id the user never typed.
+const CLI::Validator kTaskId(
+    [](std::string& text) {
+      std::int64_t v = 0;
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      const bool ok = !text.empty() && text[0] != '-' && ec == std::errc() && end == text.data() + text.size() && v > 0;
+      return ok ? std::string() : "must be a task id (a whole number from 1 to 9223372036854775807, the first column of demcal query), got \"" + text + "\"";
+    },
+    "ID", "task id");
 
 std::string default_out_dir(const std::string& db_path) {
   const auto parent = std::filesystem::absolute(db_path).parent_path();

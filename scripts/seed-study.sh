@@ -61,8 +61,9 @@ t_run=$(( $(date +%s) - t0 ))
 
 for m in phi_peak phi_cv phi_diff; do
   # The output folder's path is cut from what map prints: the page is read from anywhere.
-  { "$DEMCAL" map --metric $m --job seed-dense-grid --db "$DB" --no-fit --out "$OUT/map_$m.png" 2>&1 || true; } |
-    sed "s|$OUT/||g" > "$OUT/map_$m.txt"
+  # (Bash's own substitution, not sed: the path may hold any character.)
+  txt=$("$DEMCAL" map --metric $m --job seed-dense-grid --db "$DB" --no-fit --out "$OUT/map_$m.png" 2>&1 || true)
+  printf '%s\n' "${txt//"$OUT/"/}" > "$OUT/map_$m.txt"
 done
 fit_rc=0
 "$DEMCAL" fit --target phi_peak=41.4 --target phi_cv=32.6 --job seed-dense-grid --db "$DB" > "$OUT/fit.txt" 2>&1 || fit_rc=$?
@@ -340,14 +341,15 @@ damped_means() {
   echo "## Maps (Fig. 2.11; seed ranges φ_peak 32–51°, φ_cv 26–40°)"
   echo
   for m in phi_peak phi_cv phi_diff; do echo "![$m](map_$m.png)"; done
-  # The grid points a triangle marks on the phi_peak and phi_diff maps, as map lists them.
+  # The grid points a triangle marks on the phi_peak and phi_diff maps, and the rule,
+  # as map printed them (the rule is the engine's, not restated here).
   if grep -q '^peak on a spike' "$OUT/map_phi_peak.txt" 2>/dev/null; then
     echo
-    echo "Grid points marked with a triangle: a packing there takes φ_peak from a spike of the walls' stress"
-    echo "(more than 2° above the peak of its 5-row running mean; \`demcal map --metric phi_peak_smoothed_deg\`"
-    echo "maps the running mean's peak):"
+    echo "Grid points marked with a triangle: a packing there takes φ_peak from a spike of the walls' stress:"
     echo
     grep '^peak on a spike' "$OUT/map_phi_peak.txt" | sed 's/^peak on a spike: /- /'
+    echo
+    grep '^(phi_peak ' "$OUT/map_phi_peak.txt" | sed 's/^(\(.*\))$/The rule, as `demcal map` prints it: \1./' || true
   fi
   echo
   echo "## Inverse fit of the seed's targets (φ_peak 41.4°, φ_cv 32.6°; answer θ = 30°, η = 0.1)"

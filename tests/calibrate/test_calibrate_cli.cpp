@@ -141,7 +141,7 @@ TEST(CalibrateMap, APointWhosePeakRestsOnASpikeIsMarkedAndListed) {
     ASSERT_EQ(r.rc, 0) << r.out << r.err;
     EXPECT_NE(r.out.find(line.str()), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("--metric phi_peak_smoothed_deg maps the running mean's peak"), std::string::npos) << r.out;
-    EXPECT_NE(slurp(d.file("m.svg")).find("phi_peak on a spike (a replica)"), std::string::npos) << metric;
+    EXPECT_NE(slurp(d.file("m.svg")).find("phi_peak on a spike (in a replica)"), std::string::npos) << metric;
   }
   const auto cv = run_demcal({"map", "--metric", "phi_cv", "--out", "m.svg"}, d.path.string());
   ASSERT_EQ(cv.rc, 0) << cv.out << cv.err;

@@ -519,6 +519,15 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   }
   r = run_demcal({"plot", "999", "--series", "energy", "--x", "step", "--y", "total", "--out", "e.png"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
+  // An id past int64 is refused as typed, not clamped to another id; so are 0 and signs.
+  for (const char* bad : {"99999999999999999999", "0", "-5", "+5", "5x"}) {
+    r = run_demcal({"plot", bad, "--series", "energy", "--out", "bad.png"}, d.path.string());
+    EXPECT_EQ(r.rc, 2) << bad;
+    EXPECT_NE(r.err.find("must be a task id"), std::string::npos) << bad << ": " << r.err;
+    EXPECT_NE(r.err.find(std::string("got \"") + bad + "\""), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("9223372036854775807\""), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(d.path / "bad.png"));
+  }
   // An output folder that does not exist is the command line's fault, said before gnuplot runs.
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "no/e.png"},
                  d.path.string());

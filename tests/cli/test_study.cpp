@@ -235,7 +235,8 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   ASSERT_EQ(sm.rc, 0) << sm.err;
   EXPECT_NE(sm.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << sm.out;
   EXPECT_NE(sm.out.find("phi_peak judged by the peak of its running mean"), std::string::npos) << sm.out;
-  EXPECT_NE(sm.out.find("(judged here by the running mean's peak, which the spike does not move)"), std::string::npos)
+  EXPECT_NE(sm.out.find("(judged here by the running mean's peak, which a spike of a row or two barely moves)"),
+            std::string::npos)
       << sm.out;
   EXPECT_NE(sm.out.find("recommended settings (fidelity, phi_peak by its running mean,"), std::string::npos) << sm.out;
   for (const char* f : {"fidelity-smoothed-peak_dt.png", "fidelity-smoothed-peak-dt.csv",
@@ -278,12 +279,17 @@ TEST(CliStudy, FidelityUnknownKnobIsBadInput) {
   EXPECT_NE(r.err.find("--reference"), std::string::npos) << r.err;
   r = run_demcal({"study", "timestep", "--knobs", "dt"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
-  // A smoothed peak where there is no peak strength: named, refused before anything is written.
-  for (const char* study : {"repose-fidelity", "timestep"}) {
-    r = run_demcal({"study", study, "--quick", "--peak", "smoothed"}, d.path.string());
-    EXPECT_EQ(r.rc, 2) << study;
-    EXPECT_NE(r.err.find("--peak"), std::string::npos) << r.err;
-  }
+  // --peak where there is no peak strength, even as its default raw: named, refused
+  // before anything is written.
+  for (const char* study : {"repose-fidelity", "timestep", "grazing"})
+    for (const char* peak : {"smoothed", "raw"}) {
+      r = run_demcal({"study", study, "--quick", "--peak", peak, "--out", "peak-out"}, d.path.string());
+      EXPECT_EQ(r.rc, 2) << study << " " << peak;
+      EXPECT_NE(r.err.find("--peak: study " + std::string(study) + " has no peak strength to judge"), std::string::npos)
+          << r.err;
+      EXPECT_FALSE(fs::exists(d.path / "peak-out")) << study;
+      EXPECT_FALSE(fs::exists(d.path / "demcal.db")) << study;
+    }
   r = run_demcal({"study", "fidelity", "--quick", "--peak", "median"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--peak"), std::string::npos) << r.err;
