@@ -19,6 +19,9 @@ here=$(cd "$(dirname "$0")/../.." && pwd)
 build=${1:-$here/build}
 n=${2:-2000}
 steps=${3:-2000}
+repeat=${4:-1}
+[[ $repeat =~ ^[0-9]+$ ]] && ((10#$repeat > 0)) || { echo "REPEAT must be a positive integer, got '$repeat'" >&2; exit 2; }
+repeat=$((10#$repeat))
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps" >&2; exit 2; }
 for b in bench_engine_throughput bench_lammps_compare; do
   [ -x "$build/bench/$b" ] || { echo "$build/bench/$b missing: build first (cmake --build $build)" >&2; exit 2; }
@@ -33,8 +36,6 @@ if [ ! -f "$pack" ]; then
   echo "preparing the $n-grain pack (cached in $BENCH_PACK_DIR) ..." >&2
   "$build/bench/bench_engine_throughput" "$n" --steps 10 --threads 1 >/dev/null
 fi
-repeat=${4:-1}
-case $repeat in ''|*[!0-9]*|0) echo "REPEAT must be a positive integer, got '$repeat'" >&2; exit 2 ;; esac
 demcal_all=() lammps_all=() ratios=()
 for ((k = 1; k <= repeat; k++)); do
   demcal_line=$("$build/bench/bench_lammps_compare" "$pack" --steps "$steps" --lammps-dir "$work")
