@@ -224,9 +224,9 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   jobs::ImageFile image(r.out);
   std::ofstream g(path("map.gp"));
   // Two lines: on one, a long metric label and surrogate ran past the 900-pixel width.
-  char title[300];
-  std::snprintf(title, sizeof title, "%s, job %s: %d points with data, %d holes", rs.label.c_str(), rs.job.c_str(),
-                rs.with_data(), rs.holes());
+  // A string, not a fixed buffer: a long job name cut mid-character made the SVG invalid.
+  const std::string title = rs.label + ", job " + rs.job + ": " + std::to_string(rs.with_data()) +
+                            " points with data, " + std::to_string(rs.holes()) + " holes";
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
     << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe()) : quoted(r.title))
     << " noenhanced font ',10' offset 0,0.6\n"

@@ -42,7 +42,7 @@ struct StudyOptions {
   std::vector<std::string> knobs;            // knobs to run; empty: all
   std::map<std::string, double> reference;   // knob -> reference setting; absent: the knob's most expensive
   // fidelity (triaxial) only: judge phi_peak by phi_peak_smoothed_deg, the peak of its
-  // running mean, which a spike of a row or two in the walls' stress barely moves. The tasks
+  // running mean, which a spike of one or two rows in the walls' stress moves by at most two fifths of its height. The tasks
   // are the same; the charts, CSV and recommendation are named <name>-smoothed-peak.
   bool smoothed_peak = false;
   bool terminal = false;

@@ -50,7 +50,7 @@ void add_plot(CLI::App& app, int& exit_code) {
     std::int64_t task = 0;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("TASK", a->task, "task id (the first column of demcal query)")->required()->check(kTaskId);
+  cmd->add_option("TASK", a->task, "task id (the first column of demcal query)")->required()->transform(kTaskId);
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--series", a->series, "series name, e.g. energy")->required();
   cmd->add_option("--x", a->x, "column for the x axis, e.g. step (default for the scenes' own series: triaxial eps1, energy step or time, profile x)");

@@ -133,12 +133,14 @@ const CLI::Validator kPositiveFinite(
     "NUMBER > 0", "positive finite number");
 
 // Whole text, no sign, within int64: CLI11 would clamp 99999999999999999999 to
-// INT64_MAX and the error would name an id the user never typed.
+// INT64_MAX and the error would name an id the user never typed. Attached with
+// transform(), it hands CLI11 the id in plain decimal: CLI11 reads 010 as octal 8.
 const CLI::Validator kTaskId(
     [](std::string& text) {
       std::int64_t v = 0;
       const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
       const bool ok = !text.empty() && text[0] != '-' && ec == std::errc() && end == text.data() + text.size() && v > 0;
+      if (ok) text = std::to_string(v);
       return ok ? std::string() : "must be a task id (a whole number from 1 to 9223372036854775807, the first column of demcal query), got \"" + text + "\"";
     },
     "ID", "task id");

@@ -37,7 +37,7 @@ extern const CLI::Validator kPlainPath;
 extern const CLI::Validator kDbPath;
 // A finite number: CLI11's ranges let NaN through.
 extern const CLI::Validator kFinite;
-extern const CLI::Validator kTaskId;  // a positive int64, refused whole rather than clamped
+extern const CLI::Validator kTaskId;  // a positive int64 in decimal; attach with transform()
 extern const CLI::Validator kPositiveFinite;
 
 // A job's notes (legal but easy to miss) on stderr, one line each.

@@ -66,7 +66,9 @@ for m in phi_peak phi_cv phi_diff; do
   printf '%s\n' "${txt//"$OUT/"/}" > "$OUT/map_$m.txt"
 done
 fit_rc=0
-"$DEMCAL" fit --target phi_peak=41.4 --target phi_cv=32.6 --job seed-dense-grid --db "$DB" > "$OUT/fit.txt" 2>&1 || fit_rc=$?
+txt=$("$DEMCAL" fit --target phi_peak=41.4 --target phi_cv=32.6 --job seed-dense-grid --db "$DB" 2>&1) || fit_rc=$?
+# Its hints name the database: by its file name, not this machine's path.
+printf '%s\n' "${txt//"$DB"/$(basename "$DB")}" > "$OUT/fit.txt"
 "$DEMCAL" map --metric phi_peak --job seed-dense-grid --db "$DB" --out "$OUT/map_phi_peak_fit.png" > /dev/null 2>&1 || true
 "$DEMCAL" envelope --job seed-dense-loose --where packing=dense --db "$DB" > "$OUT/envelope_dense.txt" 2>&1 || true
 "$DEMCAL" envelope --job seed-dense-loose --where packing=loose --db "$DB" > "$OUT/envelope_loose.txt" 2>&1 || true

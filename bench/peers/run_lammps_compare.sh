@@ -20,7 +20,7 @@ build=${1:-$here/build}
 n=${2:-2000}
 steps=${3:-2000}
 repeat=${4:-1}
-[[ $repeat =~ ^[0-9]+$ ]] && ((10#$repeat > 0)) || { echo "REPEAT must be a positive integer, got '$repeat'" >&2; exit 2; }
+[[ $repeat =~ ^[0-9]{1,4}$ ]] && ((10#$repeat > 0)) || { echo "REPEAT must be an integer from 1 to 9999, got '$repeat'" >&2; exit 2; }
 repeat=$((10#$repeat))
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps" >&2; exit 2; }
 for b in bench_engine_throughput bench_lammps_compare; do
@@ -47,9 +47,12 @@ for ((k = 1; k <= repeat; k++)); do
   lammps_ns=$(awk -v s="$lsec" -v n="$n" -v k="$steps" 'BEGIN{printf "%.2f", s*1e9/(n*k)}')
   echo "lammps: $loop -> $lammps_ns ns/particle-step"
   demcal_ns=$(echo "$demcal_line" | sed -E 's/.* ([0-9.]+) ns\/particle-step.*/\1/')
+  for v in "$demcal_ns" "$lammps_ns"; do
+    [[ $v =~ ^[0-9]+(\.[0-9]+)?$ ]] && [[ ! $v =~ ^0+(\.0+)?$ ]] || { echo "could not read a time from the run (got '$v'); see the lines above" >&2; exit 1; }
+  done
   awk -v a="$lammps_ns" -v b="$demcal_ns" 'BEGIN{printf "ratio LAMMPS / demcal: %.2f (demcal is %.2fx %s per particle-step)\n", a/b, (a>b?a/b:b/a), (a>b?"faster":"slower")}'
   demcal_all+=("$demcal_ns") lammps_all+=("$lammps_ns")
-  ratios+=("$(awk -v a="$lammps_ns" -v b="$demcal_ns" 'BEGIN{printf "%.4f", a/b}')")
+  ratios+=("$(awk -v a="$lammps_ns" -v b="$demcal_ns" 'BEGIN{printf "%.6f", a/b}')")
 done
 [ "$repeat" -gt 1 ] || exit 0
 # min / median / max of the arguments (awk only: no early-closing pipe under pipefail).

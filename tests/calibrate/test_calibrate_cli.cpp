@@ -272,6 +272,14 @@ TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
       << r.out << r.err;
   EXPECT_NE((r.out + r.err).find("e.g.: not quasi-static: test"), std::string::npos) << r.out << r.err;
   EXPECT_EQ((r.out + r.err).find("not at critical state"), std::string::npos) << r.out << r.err;
+  // The hint to see which queries the database the fit read, named unless it is the default.
+  EXPECT_NE((r.out + r.err).find("(demcal query --job grid)"), std::string::npos) << r.out << r.err;
+  fs::copy_file(db, d.path / "other.db");
+  std::vector<std::string> other = args;
+  other.insert(other.end(), {"--db", "other.db"});
+  r = run_demcal(other, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE((r.out + r.err).find("(demcal query --db other.db --job grid)"), std::string::npos) << r.out << r.err;
   // Two results whose phi_cv window was judged not at critical state: the phi_cv
   // surface says so by name, the phi_peak one does not.
   {

@@ -528,6 +528,12 @@ TEST(Cli, PlotDrawsPngAndSvg) {
     EXPECT_EQ(r.err.find("9223372036854775807\""), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(d.path / "bad.png"));
   }
+  // A leading zero is decimal, as query prints ids (CLI11 alone reads 010 as octal 8).
+  r = run_demcal({"plot", "00" + id, "--series", "energy", "--x", "step", "--y", "total", "--out", "z.png"},
+                 d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  r = run_demcal({"plot", "010", "--series", "energy", "--out", "bad.png"}, d.path.string());
+  EXPECT_NE(r.err.find("no task with id 10"), std::string::npos) << r.err;
   // An output folder that does not exist is the command line's fault, said before gnuplot runs.
   r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "no/e.png"},
                  d.path.string());

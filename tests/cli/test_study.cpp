@@ -235,7 +235,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   ASSERT_EQ(sm.rc, 0) << sm.err;
   EXPECT_NE(sm.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << sm.out;
   EXPECT_NE(sm.out.find("phi_peak judged by the peak of its running mean"), std::string::npos) << sm.out;
-  EXPECT_NE(sm.out.find("(judged here by the running mean's peak, which a spike of a row or two barely moves)"),
+  EXPECT_NE(sm.out.find("(judged here by the running mean's peak, which a spike of one or two rows moves by at most two fifths of its height)"),
             std::string::npos)
       << sm.out;
   EXPECT_NE(sm.out.find("recommended settings (fidelity, phi_peak by its running mean,"), std::string::npos) << sm.out;
