@@ -219,9 +219,10 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
       if (row.r.params.contains("eta")) et.insert(row.r.params["eta"].dump());
     }
     if (th.size() < 2 || et.size() < 2)
-      throw JobError("--job", "job \"" + job + "\" has " + std::to_string(th.size()) + " theta_deg and " +
-                                  std::to_string(et.size()) +
-                                  " eta value(s); maps need a grid over at least 2 of each, fits 3");
+      throw JobError("--job", "job \"" + job + "\" (scene " + rows.front().r.task.scene +
+                                  ") is not a (theta, eta) grid: it has " + std::to_string(th.size()) +
+                                  " theta_deg and " + std::to_string(et.size()) +
+                                  " eta value(s); maps need at least 2 of each, fits 3");
   }
 
   // Only replicas may be averaged: any other parameter that varies must be pinned.

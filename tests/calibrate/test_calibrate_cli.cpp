@@ -478,7 +478,7 @@ TEST(CalibrateCli, BadInputNamesTheFieldAndExitsTwo) {
   }
   r = run_demcal({"fit", "--target", "phi_peak=40", "--job", "line"}, dir);
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("has 1 theta_deg and"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("is not a (theta, eta) grid: it has 1 theta_deg and"), std::string::npos) << r.err;
 }
 
 TEST(CalibrateCli, ImpossibleTargetsAndPinnedAxesAreRefusedAndNothingIsStored) {
