@@ -3,6 +3,7 @@
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/material_params.hpp"
+#include "jobs/query.hpp"
 #include "jobs/runner.hpp"
 
 #include <algorithm>
@@ -286,9 +287,6 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     " no value at a corner (" + g +
                                     "): the surrogate bridges the gap there; rerun or replace those tasks");
   }
-  // The hints name the database unless it is the default, or they would query another.
-  const std::string query =
-      "demcal query" + (store.path() == "demcal.db" ? std::string() : " --db " + store.path()) + " --job ";
   // The surrogates stand on these results: say when they carry warnings, once a job.
   std::map<std::string, const ResponseSurface*> warned;
   for (const auto& rs : cal.surfaces)
@@ -299,14 +297,14 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     if (rs.not_critical > 0)
       cal.result.warnings.push_back(std::to_string(rs.not_critical) + " of the " + rs.metric + " results used from job " +
                                     rs.job + " come from a window the run judged not at critical state (still "
-                                    "dilating or phi_mob drifting; " + query + rs.job +
+                                    "dilating or phi_mob drifting; " + jobs::query_hint(store.path(), rs.job) +
                                     " shows which): the surrogate takes them as critical-state values");
   // A peak taken from a spike of one or two rows reads degrees above the curve's hump.
   for (const auto& rs : cal.surfaces)
     if (rs.on_spike > 0)
       cal.result.warnings.push_back(std::to_string(rs.on_spike) + " of the " + rs.metric + " results used from job " +
                                     rs.job + " take phi_peak from a spike of the walls' stress (" + spike_rule() + ") "
-                                    "(" + query + rs.job + " shows which): the surrogate takes the spike as "
+                                    "(" + jobs::query_hint(store.path(), rs.job) + " shows which): the surrogate takes the spike as "
                                     "peak strength; a target on phi_peak_smoothed_deg fits the peak of the running "
                                     "mean instead");
   for (const auto& [job, rs] : warned) {
@@ -317,7 +315,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     int used = 0;
     for (const auto& p : rs->points) used += static_cast<int>(p.values.size());
     cal.result.warnings.push_back(std::to_string(rs->warned) + " of the " + std::to_string(used) + " results used from job " +
-                                  job + " carry warnings (" + query + job + "), e.g.: " + w);
+                                  job + " carry warnings (" + jobs::query_hint(store.path(), job) + "), e.g.: " + w);
   }
   return cal;
 }

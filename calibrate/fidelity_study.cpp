@@ -567,7 +567,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
                   std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
     if (!spiked.empty())
       rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
-          << (o.smoothed_peak ? " (judged here by the running mean's peak, which a spike of one or two rows moves by at most two fifths of its height)" : "");
+          << (o.smoothed_peak ? " (judged here by the running mean's peak, " + running_mean_vs_spike() + ")" : "");
     k.recommendation = rec.str();
     s.knobs.push_back(std::move(k));
   }

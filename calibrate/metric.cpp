@@ -67,4 +67,9 @@ std::string spike_rule() {
   return text;
 }
 
+std::string running_mean_vs_spike() {
+  static_assert(engine::TriaxialResult::kPeakSmoothingRows == 5, "the text below counts fifths of the 5-row window");
+  return "which a spike of one or two rows moves by at most two fifths of its height";
+}
+
 }  // namespace demcal::calibrate

@@ -34,5 +34,8 @@ std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std
 bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics);
 // "more than 2 deg above the peak of its 5-row running mean", from the same constants.
 std::string spike_rule();
+// What the running mean's peak owes a spike, as a relative clause that follows
+// "the running mean's peak": one text for the study, map and help.
+std::string running_mean_vs_spike();
 
 }  // namespace demcal::calibrate

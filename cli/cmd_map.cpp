@@ -5,6 +5,7 @@
 #include "calibrate/calibration.hpp"
 #include "calibrate/envelope.hpp"
 #include "calibrate/map.hpp"
+#include "calibrate/metric.hpp"
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
 
@@ -67,7 +68,7 @@ void add_map(CLI::App& app, int& exit_code) {
                     << p.n() << " replica(s))\n";
       if (rs.on_spike > 0)
         std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
-                  << "mean's peak, which a spike of one or two rows moves by at most two fifths of its height)\n";
+                  << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
       if (overlay)
         std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
                   << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";

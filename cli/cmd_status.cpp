@@ -2,6 +2,7 @@
 
 #include "db/store.hpp"
 #include "jobs/liveness.hpp"
+#include "jobs/query.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/work_forecast.hpp"
 
@@ -11,11 +12,6 @@
 
 namespace demcal::cli {
 namespace {
-
-// The query command that shows a job's tasks, naming the database unless it is the default.
-std::string query_hint(const std::string& db, const std::string& job) {
-  return "demcal query" + (db == "demcal.db" ? std::string() : " --db " + db) + " --job " + job;
-}
 
 std::string first_line(const std::string& text, std::size_t max) {
   std::string s = text.substr(0, text.find('\n'));
@@ -50,12 +46,12 @@ void print_messages(db::Store& store, const db::StatusCounts& counts, const std:
       }
     }
     if (any_failed && failed->second > kShown)
-      std::cout << name << ": " << failed->second - kShown << " more failed (" << query_hint(db, name) << ")\n";
+      std::cout << name << ": " << failed->second - kShown << " more failed (" << jobs::query_hint(db, name) << ")\n";
     if (w.n > 0) warned.push_back(w);
   }
   for (const auto& w : warned)
     std::cout << w.job << ": " << w.n << " done task(s) with warnings, e.g. task " << w.first_id << ": " << w.first
-              << " (" << query_hint(db, w.job) << " shows each)\n";
+              << " (" << jobs::query_hint(db, w.job) << " shows each)\n";
 }
 
 // A database holding only part of a job (a shard's part, a merge of some shards)

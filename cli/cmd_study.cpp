@@ -7,6 +7,7 @@
 #include "jobs/gnuplot_process.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/runner.hpp"
+#include "calibrate/metric.hpp"
 #include "calibrate/study.hpp"
 
 #include <algorithm>
@@ -212,9 +213,9 @@ void add_study(CLI::App& app, int& exit_code) {
       ->delimiter(',');
   cmd->add_option("--peak", a->peak,
                   "fidelity: the phi_peak the errors are taken on: raw (phi_peak_deg, the design's definition) or "
-                  "smoothed (phi_peak_smoothed_deg, the peak of its running mean over 5 rows, which a spike of one "
-                  "or two rows in the walls' stress moves by at most two fifths of its height); the same tasks, "
-                  "with the charts, CSV and recommendation named fidelity-smoothed-peak")
+                  "smoothed (phi_peak_smoothed_deg, the peak of its running mean over 5 rows, " +
+                      calibrate::running_mean_vs_spike() +
+                      "); the same tasks, with the charts, CSV and recommendation named fidelity-smoothed-peak")
       ->check(CLI::IsMember({"raw", "smoothed"}))
       ->capture_default_str();
   cmd->callback([a, cmd, &exit_code] {

@@ -139,7 +139,8 @@ const CLI::Validator kTaskId(
     [](std::string& text) {
       std::int64_t v = 0;
       const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-      const bool ok = !text.empty() && text[0] != '-' && ec == std::errc() && end == text.data() + text.size() && v > 0;
+      // from_chars takes no '+' and refuses empty text; v > 0 also refuses a '-'.
+      const bool ok = ec == std::errc() && end == text.data() + text.size() && v > 0;
       if (ok) text = std::to_string(v);
       return ok ? std::string() : "must be a task id (a whole number from 1 to 9223372036854775807, the first column of demcal query), got \"" + text + "\"";
     },

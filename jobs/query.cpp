@@ -346,6 +346,10 @@ Where parse_where(const std::string& text) {
   return Where{text.substr(0, eq), text.substr(eq + 1)};
 }
 
+std::string query_hint(const std::string& db, const std::string& job) {
+  return "demcal query" + (db == "demcal.db" ? std::string() : " --db " + db) + " --job " + job;
+}
+
 std::string artifact_of(const Artifacts& artifacts, const std::string& kind) {
   std::string found;
   for (const auto& [k, path] : artifacts)

@@ -17,6 +17,9 @@ struct Where {
 Where parse_where(const std::string& text);
 // Whether a stored parameter value equals the text of a --where (numbers to 1e-12).
 bool value_matches(const nlohmann::json& v, const std::string& want);
+// "demcal query [--db DB] --job JOB": the command that shows a job's tasks, for hints
+// in messages; names the database unless it is the default, or it would query another.
+std::string query_hint(const std::string& db, const std::string& job);
 
 struct ResultRow {
   db::TaskRow task;
