@@ -87,8 +87,8 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--job", a->jobs, "job(s) to read (default: the job storing each metric); repeatable");
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
-  cmd->add_option("--refine", a->refine, "rounds of DEM runs around the answer, refitting after each")->check(CLI::Range(0, 20));
-  cmd->add_option("--workers", a->workers, "worker processes for --refine (default: the core count)")->check(CLI::Range(1, 4096));
+  cmd->add_option("--refine", a->refine, "rounds of DEM runs around the answer, refitting after each")->transform(kWholeNumber)->check(CLI::Range(0, 20));
+  cmd->add_option("--workers", a->workers, "worker processes for --refine (default: the core count)")->transform(kWholeNumber)->check(CLI::Range(1, 4096));
   cmd->add_option("--out", a->out, "HDF5 output directory for --refine (default: demcal-out next to the database)")->check(kPlainPath);
   cmd->add_option("--format", a->format, "text or json")->capture_default_str();
   cmd->callback([a, &exit_code] {

@@ -19,7 +19,7 @@ namespace demcal::cli {
 void add_map(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("map", "Contour map of a metric over (theta, eta), PNG or SVG");
   struct Args {
-    std::string db = "demcal.db", job, metric, out;
+    std::string db = "demcal.db", job, metric, out, title;
     std::vector<std::string> where;
     bool no_fit = false;
   };
@@ -29,6 +29,8 @@ void add_map(CLI::App& app, int& exit_code) {
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)")->check(kPlainPath);
+  cmd->add_option("--title", a->title, "the chart's title, one line (default: metric, job, points and holes, then the surrogate)")
+      ->check(kOneLine);
   cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
   cmd->callback([a, &exit_code] {
     const auto body = [&] {
@@ -53,6 +55,7 @@ void add_map(CLI::App& app, int& exit_code) {
       if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job, a->metric);
       calibrate::MapRequest mr;
       mr.out = out;
+      mr.title = a->title;
       mr.overlay = overlay ? &*overlay : nullptr;
       calibrate::draw_map(rs, s, mr);
       std::cout << "wrote " << out << ": " << rs.label << " of job " << job << ", " << rs.with_data() << " point(s) with data, "

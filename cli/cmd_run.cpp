@@ -102,7 +102,7 @@ void add_run(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<RunArgs>();
   cmd->add_option("JOB", a->job, "job file (JSON)")->required()->check(kPlainPath);
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
-  cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->check(CLI::Range(1, 4096));
+  cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->transform(kWholeNumber)->check(CLI::Range(1, 4096));
   cmd->add_option("--out", a->out, "output directory (default: demcal-out/ next to the database)")->check(kPlainPath);
   cmd->add_flag("--retry-failed", a->retry_failed, "run the job's failed tasks again");
   cmd->add_flag("--requeue-running", a->requeue_running,

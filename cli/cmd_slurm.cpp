@@ -199,12 +199,12 @@ void add_slurm(CLI::App& app, int& exit_code) {
   cmd->add_option("JOB", a->job, "job file (JSON)")->required()->check(kPlainPath);
   cmd->add_option("--array", a->array, "number of shards (array elements 1..N)")
       ->required()
-      ->check(CLI::Range(1, jobs::kMaxShards));
+      ->transform(kWholeNumber)->check(CLI::Range(1, jobs::kMaxShards));
   cmd->add_option("--partition", a->partition, "SLURM partition");
   cmd->add_option("--time", a->time, "time limit per shard (SLURM format, e.g. 4:00:00)");
   cmd->add_option("--cpus-per-task", a->cpus, "cores per shard (its local --workers)")
       ->capture_default_str()
-      ->check(CLI::Range(1, 4096));
+      ->transform(kWholeNumber)->check(CLI::Range(1, 4096));
   cmd->add_option("--db", a->db, "the merged database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--parts", a->parts, "folder for the shards' databases and logs (default: parts/ next to --db)")->check(kPlainPath);
   cmd->add_option("--demcal", a->demcal, "demcal executable on the cluster (default: this one)")->check(kPlainPath);

@@ -196,13 +196,13 @@ void add_study(CLI::App& app, int& exit_code) {
   cmd->add_option("--db", a->db, "SQLite database (timestep, fidelity, repose-fidelity)")->check(kDbPath)->capture_default_str();
   cmd->add_option("--out", a->out, "where charts and CSV go (default: demcal-out/study-NAME next to the database)")->check(kPlainPath);
   cmd->add_flag("--quick", a->quick, "a small, fast version (seconds): for tests and a first look");
-  cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->check(CLI::Range(1, 4096));
+  cmd->add_option("--workers", a->workers, "worker processes (default: the core count)")->transform(kWholeNumber)->check(CLI::Range(1, 4096));
   cmd->add_option("--tolerance", a->tolerance,
                   "timestep: accepted |relative energy drift| per simulated second (default 0.1); "
                   "fidelity, repose-fidelity: accepted error + replica sd in degrees (default 2)")
       ->check(kPositiveFinite);
   cmd->add_option("--replicas", a->replicas, "fidelity studies: packings (seeds 1..R) per setting (default 3, --quick 1)")
-      ->check(CLI::Range(1, 1000));
+      ->transform(kWholeNumber)->check(CLI::Range(1, 1000));
   cmd->add_option("--knobs", a->knobs,
                   "fidelity studies: knobs to vary, comma-separated (fidelity: particles, rate, dt, density; "
                   "repose-fidelity: depth, column, stiffness, dt; default all)")

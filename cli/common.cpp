@@ -98,6 +98,15 @@ std::string plain_path_error(const std::string& path) {
 
 const CLI::Validator kPlainPath(plain_path_error, "PATH", "plain path");
 
+const CLI::Validator kOneLine(
+    [](std::string& text) {
+      for (const char ch : text)
+        if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f)
+          return std::string("contains a control character (newline, tab, ...): give one line of text");
+      return valid_utf8(text) ? std::string() : std::string("is not valid UTF-8");
+    },
+    "", "one line of text");
+
 const CLI::Validator kDbPath(
     [](std::string& path) {
       if (std::string e = plain_path_error(path); !e.empty()) return e;
@@ -145,6 +154,18 @@ const CLI::Validator kTaskId(
       return ok ? std::string() : "must be a task id (a whole number from 1 to 9223372036854775807, the first column of demcal query), got \"" + text + "\"";
     },
     "ID", "task id");
+
+const CLI::Validator kWholeNumber(
+    [](std::string& text) {
+      std::int64_t v = 0;
+      // from_chars takes a '-' but no '+'; a '+' the user typed is as good as none.
+      const char* first = text.data() + (text.size() > 1 && text[0] == '+' && text[1] != '-' ? 1 : 0);
+      const auto [end, ec] = std::from_chars(first, text.data() + text.size(), v);
+      const bool ok = ec == std::errc() && end == text.data() + text.size();
+      if (ok) text = std::to_string(v);
+      return ok ? std::string() : "must be a whole number in decimal digits, got \"" + text + "\"";
+    },
+    "", "whole number");
 
 std::string default_out_dir(const std::string& db_path) {
   const auto parent = std::filesystem::absolute(db_path).parent_path();

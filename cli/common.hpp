@@ -35,9 +35,16 @@ void require_writable_file(const std::string& flag, const std::string& file);
 // refuses the names SQLite would not read as a file (":memory:", "file:...").
 extern const CLI::Validator kPlainPath;
 extern const CLI::Validator kDbPath;
+// One line of UTF-8 text (a chart title): gnuplot's title ends at a newline, and
+// the SVG must be valid.
+extern const CLI::Validator kOneLine;
 // A finite number: CLI11's ranges let NaN through.
 extern const CLI::Validator kFinite;
 extern const CLI::Validator kTaskId;  // a positive int64 in decimal; attach with transform()
+// A whole number written in decimal, handed on to the range check in plain decimal:
+// CLI11 reads integers with strtoll(…, 0), so "--workers 010" was octal 8 and 0x10
+// was 16. Attach with transform() before the range check.
+extern const CLI::Validator kWholeNumber;
 extern const CLI::Validator kPositiveFinite;
 
 // A job's notes (legal but easy to miss) on stderr, one line each.

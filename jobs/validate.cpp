@@ -3,6 +3,8 @@
 #include "job_error.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <sstream>
 
 namespace demcal::jobs {
 namespace {
@@ -133,6 +135,27 @@ void read_grid(const SceneDef& scene, const nlohmann::json& grid, ParamSet& out)
   }
 }
 
+// Angles are in degrees at the edges; a friction angle written in radians (0.52 for
+// 30°) is a legal, near frictionless material that nobody calibrating sand means.
+void note_radian_angles(ParamSet& out) {
+  std::vector<double> given;
+  std::string where = "material.theta_deg";
+  for (const auto& a : out.axes)
+    if (a.name == "theta_deg") {
+      where = a.path;
+      for (const auto& v : a.values) given.push_back(v.get<double>());
+    }
+  if (given.empty() && out.base.contains("theta_deg")) given.push_back(out.base["theta_deg"].get<double>());
+  if (given.empty()) return;
+  const double largest = *std::max_element(given.begin(), given.end());
+  if (!(largest > 0.0 && largest <= std::acos(0.0))) return;
+  std::ostringstream os;
+  os.precision(3);
+  os << where << ": every value is at most " << largest << ", and theta is in degrees (a near frictionless material); "
+     << "if these are radians, " << largest << " rad is " << largest * 90.0 / std::acos(0.0) << " degrees";
+  out.notes.push_back(os.str());
+}
+
 }  // namespace
 
 ParamSet read_params(const nlohmann::json& job, const SceneDef& scene) {
@@ -140,6 +163,7 @@ ParamSet read_params(const nlohmann::json& job, const SceneDef& scene) {
   for (const std::string& section : {std::string("material"), scene.name})
     if (job.contains(section)) read_object(scene, section, "", job.at(section), out);
   if (job.contains("grid")) read_grid(scene, job.at("grid"), out);
+  note_radian_angles(out);
   for (const auto& s : scene.params) {
     const bool is_axis = std::any_of(out.axes.begin(), out.axes.end(), [&](const Axis& a) { return a.name == s.name; });
     if (!is_axis && !out.base.contains(s.name) && !s.fallback.is_null()) out.base[s.name] = check_scalar(s, s.fallback, s.path());

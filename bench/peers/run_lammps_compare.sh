@@ -11,8 +11,8 @@
 # untimed steps (contact springs build up), then STEPS timed steps. Prints ns per
 # particle-step for each and the ratio. Parameter mapping: docs/performance.md.
 #
-# REPEAT (default 1) runs the pair REPEAT times, alternating the two codes, so that
-# both meet the same minutes of a shared machine; it then prints each code's best
+# REPEAT (default 1) runs the pair REPEAT times, alternating the two codes (and which
+# of them goes first), so that both meet the same minutes of a shared machine; it then prints each code's best
 # (noise on a VM only ever adds time) and the median of the pairs' ratios.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
@@ -36,11 +36,25 @@ if [ ! -f "$pack" ]; then
   echo "preparing the $n-grain pack (cached in $BENCH_PACK_DIR) ..." >&2
   "$build/bench/bench_engine_throughput" "$n" --steps 10 --threads 1 >/dev/null
 fi
-demcal_all=() lammps_all=() ratios=()
-for ((k = 1; k <= repeat; k++)); do
+run_demcal() {
   demcal_line=$("$build/bench/bench_lammps_compare" "$pack" --steps "$steps" --lammps-dir "$work")
   echo "$demcal_line"
+}
+run_lammps() {
   (cd "$work" && lmp -in in.compare -log log.lammps -screen none) || { echo "lmp failed; see its log:" >&2; tail -20 "$work/log.lammps" >&2; exit 1; }
+}
+demcal_all=() lammps_all=() ratios=()
+for ((k = 1; k <= repeat; k++)); do
+  # demcal writes LAMMPS's input in the first pair; from then on every second pair
+  # runs LAMMPS first, so that neither code always takes the first minutes of a pair.
+  ((repeat == 1)) || echo "pair $k of $repeat: $( ((k % 2 == 1)) && echo demcal || echo LAMMPS) first"
+  if ((k % 2 == 1)); then
+    run_demcal
+    run_lammps
+  else
+    run_lammps
+    run_demcal
+  fi
   # The second "Loop time" is the timed run.
   loop=$(grep '^Loop time' "$work/log.lammps" | tail -1)
   lsec=$(echo "$loop" | awk '{print $4}')

@@ -149,6 +149,26 @@ TEST(CalibrateMap, APointWhosePeakRestsOnASpikeIsMarkedAndListed) {
   EXPECT_EQ(slurp(d.file("m.svg")).find("phi_peak on a spike"), std::string::npos);
 }
 
+TEST(CalibrateMap, TitleIsTheUsersWhenGiven) {
+  TempDir d;
+  make_db(d, /*with_holes=*/false);
+  auto r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(slurp(d.file("m.svg")).find("surrogate: "), std::string::npos);
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.svg", "--title", "Sand B, dense: φ_peak & <test>"},
+                 d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string svg = slurp(d.file("m.svg"));
+  EXPECT_NE(svg.find("Sand B, dense: φ_peak &amp; &lt;test"), std::string::npos) << svg;
+  EXPECT_EQ(svg.find("surrogate: "), std::string::npos);
+  // A newline would end gnuplot's title line: refused before anything is drawn.
+  fs::remove(d.file("m.svg"));
+  r = run_demcal({"map", "--metric", "phi_peak", "--out", "m.svg", "--title", "two\nlines"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--title: contains a control character"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("m.svg")));
+}
+
 TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   TempDir d;
   const std::string db = make_db(d);

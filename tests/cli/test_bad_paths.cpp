@@ -114,6 +114,48 @@ TEST(BadPaths, NonFiniteNumbersInOptionsAreRefused) {
   EXPECT_FALSE(fs::exists(d.file("s.db")));
 }
 
+TEST(BadPaths, WholeNumbersInOptionsAreReadInDecimal) {
+  TempDir d;
+  two_databases(d);
+  const std::string before = slurp(d.file("ok.db"));
+  // CLI11 alone read 021 as octal 17, inside --refine's range, and 0x10 as 16.
+  Result r = run_demcal({"fit", "--db", "ok.db", "--target", "phi_peak=40", "--refine", "021"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--refine: Value 21 not in range 0 to 20"), std::string::npos) << r.err;
+  for (const char* v : {"0x10", "4.0", "2e1", "+-3", "", " 3"}) {
+    r = run_demcal({"run", "j.json", "--db", "ok.db", "--workers", v}, d.path.string());
+    EXPECT_EQ(r.rc, 2) << v;
+    EXPECT_NE(r.err.find(std::string("must be a whole number in decimal digits, got \"") + v + "\""), std::string::npos)
+        << v << ": " << r.err;
+  }
+  EXPECT_EQ(slurp(d.file("ok.db")), before);
+  // Zeros in front and a plus sign change nothing.
+  r = run_demcal({"slurm", "j.json", "--array", "010", "--cpus-per-task", "+02", "--db", "s.db", "--out", "s.sh"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string text = slurp(d.file("s.sh"));
+  EXPECT_NE(text.find("\nN=10\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("--cpus-per-task=2"), std::string::npos) << text;
+}
+
+TEST(BadPaths, TheCommandLinesOwnRefusalsReadLikeDemcals) {
+  TempDir d;
+  Result r = run_demcal({"run", "j.json", "--bogus"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_EQ(r.err.rfind("demcal: error: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("--bogus"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("(demcal run --help lists the options)"), std::string::npos) << r.err;
+  r = run_demcal({"run"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_EQ(r.err, "demcal: error: JOB is required\n(demcal run --help lists the options)\n");
+  r = run_demcal({"frobnicate", "--db", "x.db"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_EQ(r.err.rfind("demcal: error: unknown command \"frobnicate\" (the commands: validate, run, status, ", 0), 0u) << r.err;
+  r = run_demcal({}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_EQ(r.err, "demcal: error: A subcommand is required\n(demcal --help lists the options)\n");
+  EXPECT_FALSE(fs::exists(d.file("demcal.db")));
+}
+
 TEST(BadPaths, ADamagedDemcalDatabaseIsRefusedUntouched) {
   TempDir d;
   two_databases(d);

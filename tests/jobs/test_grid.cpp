@@ -122,6 +122,27 @@ TEST(Grid, GridOverridesBaseScalarAndNormalisesNumbers) {
   EXPECT_EQ(parse(k).tasks[0].key, job.tasks[0].key);
 }
 
+TEST(Grid, AFrictionAngleThatLooksLikeRadiansIsNoted) {
+  json j = base();
+  j["collision"]["keep_friction"] = true;
+  j["material"]["theta_deg"] = 0.5236;
+  Job job = parse(j);
+  ASSERT_EQ(job.notes.size(), 1u);
+  EXPECT_EQ(job.notes[0], "material.theta_deg: every value is at most 0.524, and theta is in degrees (a near frictionless "
+                          "material); if these are radians, 0.524 rad is 30 degrees");
+  EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 0.5236) << "legal: the value is used as given";
+  j["material"].erase("theta_deg");
+  j["grid"] = {{"theta_deg", {0.0, 0.35, 0.7}}};
+  job = parse(j);
+  ASSERT_EQ(job.notes.size(), 1u);
+  EXPECT_EQ(job.notes[0].rfind("grid.theta_deg: every value is at most 0.7,", 0), 0u) << job.notes[0];
+  // One value in degrees, or frictionless grains (0), is not a slip.
+  j["grid"] = {{"theta_deg", {0.5, 20.0}}};
+  EXPECT_TRUE(parse(j).notes.empty());
+  j["grid"] = {{"theta_deg", {0.0}}};
+  EXPECT_TRUE(parse(j).notes.empty());
+}
+
 TEST(Grid, AStepPastTheCriticalOneIsNotedBeforeTheRun) {
   json j = base();
   j["grid"] = {{"dt_factor", {0.1, 5.0}}};
