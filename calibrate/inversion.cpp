@@ -145,6 +145,8 @@ void apply_sigma(std::vector<Target>& targets, const std::string& text) {
   double s = 0;
   if (!parse_number(value, s) || !(s > 0))
     throw JobError("--sigma", "sigma of " + name + " must be a positive finite number, got \"" + value + "\"");
+  // Its square enters the misfit: 1e200 became inf there and null in the JSON.
+  if (s > 1e100) throw JobError("--sigma", "sigma of " + name + " must be at most 1e100 (no metric is that uncertain), got " + value);
   // Matched as --target matches names: phi_peak and phi_peak_deg are one metric.
   bool found = false;
   for (auto& t : targets) {
@@ -244,7 +246,7 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     t.noise_sigma = std::sqrt(models[k].surrogate.mean_leverage()) * t.replica_se;
     // The target's own uncertainty and the surrogate's error are independent; floored
     // so a perfect fit of noise-free data cannot make the misfit infinitely sharp.
-    t.sigma = std::sqrt(t.lab_sigma * t.lab_sigma + t.surrogate_sigma * t.surrogate_sigma);
+    t.sigma = std::hypot(t.lab_sigma, t.surrogate_sigma);
     t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
     values[k] = t.target;
     res.targets.push_back(t);

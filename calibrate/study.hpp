@@ -76,6 +76,7 @@ struct TimestepStudy {
   double critical_factor_full = 0;          // with friction and rolling (governing mode)
   std::string critical_mode_full;
   double recommended_factor = 0;            // 0: none passed
+  bool capped_at_critical = false;          // a larger factor passed, but past the full law's critical step
   std::string recommendation;               // the sentence printed
   std::vector<std::string> files;           // charts and CSV written
 };

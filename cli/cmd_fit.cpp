@@ -104,7 +104,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       // Opened read-only first: a foreign, newer or empty file is reported before
       // the read-write open would give it a schema.
       const std::string out_dir = a->out.empty() ? default_out_dir(a->db) : a->out;
-      if (a->refine > 0) require_writable_dir(a->out.empty() ? "--db" : "--out", out_dir);
+      if (a->refine > 0) require_writable_dir(out_flag(a->out), out_dir);
       { db::Store probe(a->db, /*read_only=*/true); }
       // A database demcal may not write still answers: the fit is printed, not stored.
       const std::string refusal = db::write_refusal(a->db);

@@ -39,7 +39,7 @@ int run(const RunArgs& a) {
   if (a.db.empty()) throw jobs::JobError("--db", "empty path");
   jobs::RunOptions opt;
   opt.out_dir = a.out.empty() ? default_out_dir(a.db) : a.out;
-  opt.out_flag = a.out.empty() ? "--db" : "--out";
+  opt.out_flag = out_flag(a.out);
   opt.shard = shard;
   require_writable_dir(opt.out_flag, opt.out_dir);  // before the database is written
   // The database checked (read-only) and its folder found, then the output folder

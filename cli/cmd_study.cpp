@@ -131,7 +131,7 @@ int study(const StudyArgs& a) {
     throw std::runtime_error("study " + a.name + " draws its charts with gnuplot, which is not on PATH: install it "
                              "(apt-get install gnuplot-nox; scripts/setup.sh does) and run the study again; nothing was run");
   // The option whose path the output folder comes from (grazing has no database).
-  const std::string flag = a.out.empty() && a.name != "grazing" ? "--db" : "--out";
+  const std::string flag = a.name != "grazing" ? out_flag(a.out) : "--out";
   // The database checked first (nothing made yet when it is refused), then the
   // output folder made and locked, then its sub-folders made, all before the database
   // is: a file or a link in their way would otherwise stop the study after it had

@@ -172,6 +172,10 @@ std::string default_out_dir(const std::string& db_path) {
   return (parent / "demcal-out").string();
 }
 
+std::string out_flag(const std::string& out) {
+  return out.empty() ? "--out (not given: the default, demcal-out/ next to --db)" : "--out";
+}
+
 void require_db(const std::string& db_path) {
   if (!std::filesystem::exists(db_path))
     throw jobs::JobError("--db", "no database at " + db_path + " (`demcal run JOB --db " + db_path + "` makes one; or give --db the path of an existing one)");

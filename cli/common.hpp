@@ -21,6 +21,9 @@ int chosen_job_errors(bool job_given, const std::function<int()>& body);
 
 // The output directory: --out, or demcal-out/ next to the database.
 std::string default_out_dir(const std::string& db_path);
+// What errors about the output folder name: "--out", or, when --out was not given,
+// that the folder is its default beside the database (not the database itself).
+std::string out_flag(const std::string& out);
 // Throws JobError("--db") when the database does not exist (read-only commands).
 void require_db(const std::string& db_path);
 // Checks before anything is written, creating nothing: throws JobError(flag) naming

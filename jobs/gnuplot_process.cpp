@@ -58,7 +58,7 @@ void stop_gnuplot(pid_t pid, int sig) {
 }  // namespace
 
 GnuplotInterrupted::GnuplotInterrupted(int signal)
-    : std::runtime_error(std::string(signal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)") +
+    : std::runtime_error(stop_signal_words(signal) +
                          " while gnuplot was drawing: gnuplot stopped, nothing written"),
       signal_(signal) {}
 

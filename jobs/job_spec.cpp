@@ -3,6 +3,7 @@
 #include "grid.hpp"
 #include "job_error.hpp"
 #include "scene_registry.hpp"
+#include "scene_resolve.hpp"
 #include "task_key.hpp"
 #include "text_groups.hpp"
 #include "validate.hpp"
@@ -228,7 +229,10 @@ void expand_tasks(const nlohmann::json& j, const SceneDef& scene, Job& job) {
     }
     Task t;
     t.index = i;
-    t.key = task_key(scene.name, scene.key_params ? scene.key_params(params[i]) : params[i], job.snapshots);
+    // An optional key written as its default is the same work as one left out.
+    nlohmann::json keyed = scene.key_params ? scene.key_params(params[i]) : params[i];
+    for (const auto& [name, value] : scene.implied) erase_default(keyed, name, value);
+    t.key = task_key(scene.name, keyed, job.snapshots);
     t.params = std::move(params[i]);
     job.tasks.push_back(std::move(t));
   }

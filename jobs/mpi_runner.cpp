@@ -386,7 +386,8 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   if (stop_signal()) {
     // Plain mpirun ends the whole job with SIGTERM when any rank dies (see
     // docs/scaling.md): what was running goes back to pending for the next run.
-    log << "\n" << (stop_signal() == SIGINT ? "interrupted" : "terminated (SIGTERM: what mpirun sends on Ctrl-C, scancel, or when a rank dies)")
+    log << "\n" << (stop_signal() == SIGTERM ? "terminated (SIGTERM: what mpirun sends on Ctrl-C, scancel, or when a rank dies)"
+                                                     : stop_signal_words(stop_signal()))
         << ": running task(s) go back to the queue\n";
     for (int r = 1; r < size; ++r) {
       Rank& k = ranks[static_cast<std::size_t>(r)];

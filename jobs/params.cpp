@@ -74,7 +74,7 @@ nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
       if (std::string(k) == "d" && !(x > 0.0 && x <= 1.0)) throw JobError(ai, "a size must be in (0, 1] m, got " + fmt(x));
       if (std::string(k) == "percent_finer" && !(x >= 0.0 && x <= 100.0))
         throw JobError(ai, "must be in [0, 100] percent, got " + fmt(x));
-      vals.push_back(x);
+      vals.push_back(x == 0.0 ? 0.0 : x);  // -0.0 is 0
     }
     out[k] = std::move(vals);
   }
@@ -160,7 +160,7 @@ nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const s
       const double d = v.get<double>();
       if (!std::isfinite(d)) throw JobError(path, "must be finite, got " + v.dump());
       check_range(s, d, path);
-      return nlohmann::json(d);
+      return nlohmann::json(d == 0.0 ? 0.0 : d);  // -0.0 is 0: one task key for one value
     }
   }
   return v;

@@ -29,6 +29,23 @@ nlohmann::json special(const db::TaskRow& t, const std::string& key) {
   return nullptr;
 }
 
+// What a --where key reads in a task: status, scene or id; a stored parameter; else
+// the value a scene's task runs at when its parameters leave that key out.
+const nlohmann::json* implied_value(const std::string& scene, const std::string& key) {
+  if (const SceneDef* def = find_scene(scene))
+    for (const auto& [k, v] : def->implied)
+      if (k == key) return &v;
+  return nullptr;
+}
+
+nlohmann::json where_value(const ResultRow& r, const std::string& key) {
+  nlohmann::json v = special(r.task, key);
+  if (!v.is_null()) return v;
+  if (r.params.contains(key)) return r.params[key];
+  const nlohmann::json* implied = implied_value(r.task.scene, key);
+  return implied ? *implied : nlohmann::json();
+}
+
 // Tables round to 6 digits for reading; CSV keeps every digit for further work.
 std::string num(double v, bool precise = false) {
   if (std::isnan(v)) return "";
@@ -215,7 +232,10 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   t.header.insert(t.header.end(), message_columns.begin(), message_columns.end());
   for (const auto& r : rows) {
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
-    for (const auto& p : params) line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : "");
+    for (const auto& p : params) {
+      const nlohmann::json* implied = r.params.contains(p) ? nullptr : implied_value(r.task.scene, p);
+      line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : implied ? cell(*implied, precise) : "");
+    }
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
     if (for_reading) {
       line.push_back("");  // filled by tag_messages
@@ -294,8 +314,8 @@ void check_where_value(const std::vector<ResultRow>& all, const Where& w) {
   }
   bool numeric = false;
   for (const auto& r : all) {
-    if (!r.params.contains(w.key)) continue;
-    const nlohmann::json& v = r.params[w.key];
+    const nlohmann::json v = where_value(r, w.key);
+    if (v.is_null()) continue;
     if ((v.is_object() || v.is_array()) && nlohmann::json::parse(w.value, nullptr, false).is_discarded())
       throw JobError("--where", w.key + " is a list or object (as the job file writes it); give it as JSON, e.g. " +
                                     w.key + "='{\"d\": [...], ...}'; got \"" + w.value + "\", which is not JSON");
@@ -385,8 +405,7 @@ std::string why_none_match(const std::vector<ResultRow>& all, const std::vector<
     std::vector<std::string> values;
     bool any = false;
     for (const auto& r : all) {
-      nlohmann::json v = special(r.task, w.key);
-      if (v.is_null()) v = r.params.contains(w.key) ? r.params[w.key] : nlohmann::json();
+      const nlohmann::json v = where_value(r, w.key);
       if (v.is_null()) continue;
       any = any || value_matches(v, w.value);
       const std::string text = cell(v, false);
@@ -415,7 +434,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
   }
   for (const auto& w : where) {
     const bool known = special(db::TaskRow{}, w.key) != nullptr ||
-                       std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return r.params.contains(w.key); });
+                       std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return !where_value(r, w.key).is_null(); });
     if (!known && !all.empty()) {
       std::vector<std::string> keys = {"status", "scene", "task"};
       for (const auto& r : all)
@@ -434,8 +453,7 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
   for (auto& r : all) {
     bool ok = true;
     for (const auto& w : where) {
-      nlohmann::json v = special(r.task, w.key);
-      if (v.is_null()) v = r.params.contains(w.key) ? r.params[w.key] : nlohmann::json();
+      const nlohmann::json v = where_value(r, w.key);
       ok = ok && !v.is_null() && value_matches(v, w.value);
     }
     if (!ok) continue;

@@ -64,6 +64,12 @@ class Runner {
   void reap(bool stopping);
   void handle_exit(const Running& r, int wstatus, bool stopping);
   void stop_all();
+  RunSummary run_loop();
+  // The database could not be written (a full disk): the workers are stopped without
+  // storing anything, this run's tasks go back to pending if the database still
+  // takes that, and the error is rethrown saying what became of them.
+  [[noreturn]] void abandon(const db::DbError& e);
+  std::string unstored_;  // the task whose result the database would not take
   // The job's counts read from the database: a GROUP BY over its tasks, ~13 ms at
   // 10,000 tasks, so a run reads them every 2 s and keeps its own tally between
   // (`Counts::ended`); other runners' progress shows at the next read.
@@ -349,7 +355,14 @@ void Runner::handle_exit(const Running& r, int wstatus, bool stopping) {
                    counts_);
     return;
   }
-  if (!store_.finish(r.task_id, token_, *out)) {
+  bool stored = false;
+  try {
+    stored = store_.finish(r.task_id, token_, *out);
+  } catch (const db::DbError&) {
+    unstored_ = describe_task(r.index, r.task_id) + " " + out->status;
+    throw;
+  }
+  if (!stored) {
     // This run was judged gone (silent past the lease) and another took the task over.
     counts_.ended("running");
     progress_.line(describe_task(r.index, r.task_id) + " " + out->status + " here, but another runner took it over "
@@ -389,6 +402,39 @@ void Runner::stop_all() {
 }
 
 RunSummary Runner::run() {
+  try {
+    return run_loop();
+  } catch (const db::DbError& e) {
+    abandon(e);
+  }
+}
+
+void Runner::abandon(const db::DbError& e) {
+  const std::size_t stopped = running_.size();
+  const std::string unstored = unstored_.empty() ? "" : unstored_ + ", but its result could not be stored; ";
+  for (const auto& r : running_) kill(r.pid, SIGTERM);
+  for (const auto& r : running_) {
+    int st = 0;
+    waitpid(r.pid, &st, 0);
+    std::error_code gone;
+    std::filesystem::remove(r.result_path, gone);
+  }
+  running_.clear();
+  progress_.finish();
+  std::string fate;
+  try {
+    const int n = store_.requeue_dead([&](const std::string& worker) { return worker != token_; });
+    fate = std::to_string(n) + " task(s) this run held are back in the queue";
+  } catch (const std::exception&) {
+    fate = "the tasks this run held are left 'running', and the next run of the job puts them back in the queue";
+  }
+  throw db::DbError(std::string(e.what()) + " (the run stopped: " + unstored + std::to_string(stopped) +
+                        " other running task(s) were stopped; " + fate +
+                        "; free the space or fix the database, then run the job again: finished tasks are kept)",
+                    e.bad_input());
+}
+
+RunSummary Runner::run_loop() {
   StopSignalGuard guard;
   Heartbeat heartbeat(store_, token_);  // before the re-queue of dead runners' tasks
   prepare();
@@ -453,7 +499,7 @@ RunSummary Runner::run() {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   if (stop_signal()) {
-    *opt_.log << "\n" << (stop_signal() == SIGINT ? "interrupted" : "terminated") << ": stopping " << running_.size()
+    *opt_.log << "\n" << stop_signal_words(stop_signal()) << ": stopping " << running_.size()
               << " running task(s); they will be retried by the next run\n";
     stop_all();
     s.interrupted = true;

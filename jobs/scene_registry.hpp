@@ -61,7 +61,12 @@ struct SceneDef {
   // The parameters a task's key hashes, where one setting has several spellings (the
   // same work must have one key to be reused); null: the parameters as they are.
   std::function<nlohmann::json(const nlohmann::json& params)> key_params;
+  // Optional keys a task's parameters may lack, and the value a task without one runs
+  // at: `--where size_distribution=uniform` must match the tasks that left it out.
+  std::vector<std::pair<std::string, nlohmann::json>> implied;
 };
+// Every scene's resolve() drops size_distribution when it is "uniform".
+inline const std::pair<std::string, nlohmann::json> kImpliedUniformSizes{"size_distribution", "uniform"};
 
 const SceneDef* find_scene(const std::string& name);
 std::vector<std::string> scene_names();

@@ -11,7 +11,7 @@ extern "C" void on_stop_signal(int sig) { g_stop = sig; }
 }  // namespace
 
 struct StopSignalGuard::Saved {
-  struct sigaction old_int {}, old_term {};
+  struct sigaction old_int {}, old_term {}, old_hup {};
 };
 
 StopSignalGuard::StopSignalGuard() : saved_(nullptr) {
@@ -23,6 +23,10 @@ StopSignalGuard::StopSignalGuard() : saved_(nullptr) {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, &saved_->old_int);
   sigaction(SIGTERM, &sa, &saved_->old_term);
+  // A closed terminal or SSH session (SIGHUP) stops the run as Ctrl-C does, tasks
+  // back in the queue, unless the run was started to outlive it (nohup: ignored).
+  sigaction(SIGHUP, nullptr, &saved_->old_hup);
+  if (saved_->old_hup.sa_handler != SIG_IGN) sigaction(SIGHUP, &sa, nullptr);
 }
 
 StopSignalGuard::~StopSignalGuard() {
@@ -30,9 +34,16 @@ StopSignalGuard::~StopSignalGuard() {
   if (!saved_) return;
   sigaction(SIGINT, &saved_->old_int, nullptr);
   sigaction(SIGTERM, &saved_->old_term, nullptr);
+  sigaction(SIGHUP, &saved_->old_hup, nullptr);
   delete saved_;
 }
 
 int stop_signal() { return g_stop; }
+
+std::string stop_signal_words(int sig) {
+  if (sig == SIGINT) return "interrupted (SIGINT)";
+  if (sig == SIGHUP) return "hung up (SIGHUP: the terminal or session closed)";
+  return "terminated (SIGTERM)";
+}
 
 }  // namespace demcal::jobs

@@ -1,6 +1,8 @@
 #pragma once
-// SIGINT/SIGTERM as a polite stop request for a run loop (local runner and MPI
+// SIGINT/SIGTERM/SIGHUP as a polite stop request for a run loop (local runner and MPI
 // rank 0): the handler only records the signal; the loop finishes cleanly.
+
+#include <string>
 
 namespace demcal::jobs {
 
@@ -20,5 +22,7 @@ class StopSignalGuard {
 
 // The signal received while a guard was installed, 0 if none.
 int stop_signal();
+// "interrupted (SIGINT)", "terminated (SIGTERM)", "hung up (SIGHUP: ...)".
+std::string stop_signal_words(int sig);
 
 }  // namespace demcal::jobs

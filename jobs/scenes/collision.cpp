@@ -129,7 +129,8 @@ SceneDef scene_collision() {
                   },
                   /*work_of=*/"the collision run",
                   /*work_left_out=*/"",
-                  /*key_params=*/nullptr};
+                  /*key_params=*/nullptr,
+                  /*implied=*/{kImpliedUniformSizes}};
 }
 
 }  // namespace demcal::jobs

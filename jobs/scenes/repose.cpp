@@ -156,8 +156,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   }
   if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;
   if (!p.contains("time_limit")) p["time_limit"] = pre.time_limit;
-  if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>()))
+  if (!(p["fit_lo"].get<double>() < p["fit_hi"].get<double>())) {
+    // Blame the one the user moved, as for min_collapse_time below.
+    if (p["fit_hi"].get<double>() == engine::ReposeConfig{}.fit_hi)
+      throw JobError("repose.fit_lo", "must be below repose.fit_hi (" + num(p["fit_hi"]) + ", its default), got " +
+                                          num(p["fit_lo"]));
     throw JobError("repose.fit_hi", "must exceed repose.fit_lo (" + num(p["fit_lo"]) + "), got " + num(p["fit_hi"]));
+  }
   if (p["min_collapse_time"].get<double>() >= p["time_limit"].get<double>()) {
     // Blame the one the user moved: a min_collapse_time left at its default is not theirs.
     if (p["min_collapse_time"].get<double>() == engine::ReposeConfig{}.min_collapse_time)
@@ -208,21 +213,10 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
-// The optional keys have no fallback, so a job that leaves them out keeps the keys
-// its tasks had before they existed; one that writes their defaults out asks for the
-// same work and gets the same key (it ran again before).
-nlohmann::json key_params(const nlohmann::json& p) {
-  const engine::ReposeConfig d;
-  nlohmann::json k = p;
-  erase_default(k, "side_walls", engine::to_string(d.side_walls));
-  erase_default(k, "rest_profile_window", d.rest_profile_window);
-  erase_default(k, "rest_profile_tol_deg", d.rest_profile_tol_deg);
-  return k;
-}
-
 }  // namespace
 
 SceneDef scene_repose() {
+  const engine::ReposeConfig d;
   return SceneDef{kSection, repose_params(), resolve, run,
                   /*headline=*/{"repose_deg", "repose_fit_err_deg", "repose_upper_deg", "repose_lower_deg", "runout_ratio",
                                 "time_to_rest_s", "particles", "wall_s"},
@@ -240,7 +234,15 @@ SceneDef scene_repose() {
                   /*work_of=*/"the run to every stage's time limit",
                   /*work_left_out=*/"a heap that comes to rest sooner costs less (tasks measured here took 12-50% of it); once done "
                                     "repose tasks are in the database, validate --db and run forecast at what they cost",
-                  /*key_params=*/key_params};
+                  /*key_params=*/nullptr,
+                  // The optional keys have no fallback, so a job that leaves them out
+                  // keeps the keys its tasks had before they existed; one that writes
+                  // their defaults out asks for the same work and gets the same key.
+                  /*implied=*/
+                  {kImpliedUniformSizes,
+                   {"side_walls", engine::to_string(d.side_walls)},
+                   {"rest_profile_window", d.rest_profile_window},
+                   {"rest_profile_tol_deg", d.rest_profile_tol_deg}}};
 }
 
 }  // namespace demcal::jobs

@@ -177,10 +177,9 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
 // One grain density, however it was written: a factor on material.density is keyed
 // as the density it gives, so that the same work has one key and is reused. The task
 // keeps the spelling its job used (a grid axis, --where).
-// shear_damping written as its default (0, none) is the same work as leaving it out.
+// (shear_damping written as its default, 0, is dropped through SceneDef::implied.)
 nlohmann::json key_params(const nlohmann::json& p) {
   nlohmann::json k = p;
-  erase_default(k, "shear_damping", 0.0);
   if (!k.contains("density_scale")) return k;
   k["scaled_density"] = k.value("density", engine::Material{}.density) * k["density_scale"].get<double>();
   k.erase("density_scale");
@@ -282,7 +281,8 @@ SceneDef scene_triaxial() {
                   },
                   /*work_of=*/"the shear",
                   /*work_left_out=*/"the preparation adds about 3-15% at the default strain",
-                  /*key_params=*/key_params};
+                  /*key_params=*/key_params,
+                  /*implied=*/{kImpliedUniformSizes, {"shear_damping", 0.0}}};
 }
 
 }  // namespace demcal::jobs

@@ -516,6 +516,7 @@ TEST(CalibrateCli, ImpossibleTargetsAndPinnedAxesAreRefusedAndNothingIsStored) {
       {{"map", "--metric", "phi_peak", "--where", "eta=0.1"}, "--where: eta is an axis"},
       {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak"}, "(e.g. phi_peak=1.0)"},
       {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak=inf"}, "must be a positive finite number, got \"inf\""},
+      {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak=1e200"}, "--sigma: sigma of phi_peak must be at most 1e100"},
       {{"fit", "--target", "phi_peak=40", "--sigma", "phi_peak=1", "--sigma", "phi_peak=2"},
        "--sigma: metric \"phi_peak\" given twice"},
       {{"fit", "--target", "phi_peak=40", "--job", "grid", "--job", "grid"}, "--job: \"grid\" given twice"},

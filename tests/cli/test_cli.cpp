@@ -296,6 +296,46 @@ TEST(Cli, QueryHeadersAreUniqueAndFitSaysNoDataFirst) {
   EXPECT_EQ(r.err.find("--where"), std::string::npos) << r.err;
 }
 
+// A key a task's parameters leave out at its default is --where'd at that default:
+// size_distribution=uniform matched no task, though the README calls writing it out
+// the same as leaving it out. And -0.0 is 0: the same task, reused.
+TEST(Cli, AWhereOnAParameterAtItsDefaultMatchesTheTasksThatLeftItOut) {
+  TempDir d;
+  nlohmann::json j = nlohmann::json::parse(collision_job("sizes", {0.1}));
+  j["grid"]["size_distribution"] = {"uniform", "uniform_mass"};
+  write(d.file("j.json"), j.dump());
+  ASSERT_EQ(run_demcal({"run", "j.json", "--workers", "1"}, d.path.string()).rc, 0);
+  Result r = run_demcal({"query", "--where", "size_distribution=uniform", "--format", "csv"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 2) << r.out;  // the header and one task
+  EXPECT_EQ(r.out.find("\n1,sizes,done,"), r.out.find('\n')) << r.out;
+  // Unfiltered, the column says what the task that left it out ran with.
+  r = run_demcal({"query", "--format", "csv"}, d.path.string());
+  EXPECT_NE(r.out.find(",1.0,uniform,"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(",1.0,uniform_mass,"), std::string::npos) << r.out;
+  r = run_demcal({"query", "--where", "size_distribution=uniform_mass", "--format", "csv"}, d.path.string());
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 2) << r.out;
+  // A database of only default tasks: the key is still known.
+  j["name"] = "plain";
+  j["grid"].erase("size_distribution");
+  write(d.file("p.json"), j.dump());
+  ASSERT_EQ(run_demcal({"run", "p.json", "--db", "p.db", "--workers", "1"}, d.path.string()).rc, 0);
+  r = run_demcal({"query", "--db", "p.db", "--where", "size_distribution=uniform"}, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("plain"), std::string::npos) << r.out;
+  // -0.0 written for eta is eta = 0: the task is reused, not run again.
+  j["material"]["eta"] = 0;
+  std::string text = j.dump();
+  const auto at = text.find("\"eta\":0");
+  ASSERT_NE(at, std::string::npos) << text;
+  text.replace(at, 7, "\"eta\":-0.0");
+  write(d.file("m.json"), text);
+  r = run_demcal({"run", "m.json", "--db", "p.db", "--workers", "1"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("job plain: 1 done (1 reused)"), std::string::npos) << text << r.err;
+  EXPECT_EQ(tasks_of(d.file("p.db")).size(), 1u);
+}
+
 TEST(Cli, GradingCurvesAreAGridAxisAndAWhereValue) {
   TempDir d;
   const nlohmann::json fine = {{"d", {0.0006, 0.001, 0.002}}, {"percent_finer", {0, 40, 100}}};
@@ -570,6 +610,14 @@ TEST(Cli, AnOutputFolderThatCannotBeWrittenWritesNoDatabase) {
   EXPECT_EQ(r.err.find("j.json: --out"), std::string::npos) << "a flag's fault, not the job file's: " << r.err;
   EXPECT_FALSE(fs::exists(d.file("x.db")));
   EXPECT_EQ(run_demcal({"run", "j.json", "--db", ""}, d.path.string()).rc, 2);
+  // Without --out the folder is the default beside the database: the error says so,
+  // and does not blame --db, which is fine.
+  fs::create_directories(d.path / "sub");
+  write(d.file("sub/demcal-out"), "x");
+  const Result def = run_demcal({"run", "j.json", "--db", "sub/x.db"}, d.path.string());
+  EXPECT_EQ(def.rc, 2);
+  EXPECT_EQ(def.err.rfind("demcal: error: --out (not given: the default, demcal-out/ next to --db): ", 0), 0u) << def.err;
+  EXPECT_FALSE(fs::exists(d.file("sub/x.db")));
 }
 
 TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {

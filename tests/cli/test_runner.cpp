@@ -154,6 +154,31 @@ TEST(Runner, SigtermStopsRunningTasksForRetry) {
   EXPECT_EQ(count_status(tasks_of(db, "term"), "done"), 4);
 }
 
+// A closed terminal or SSH session (SIGHUP) stops a run as Ctrl-C does: tasks back in
+// the queue, said so. Under nohup (SIGHUP ignored) the run goes on to the end.
+TEST(Runner, SighupStopsRunningTasksForRetryUnlessIgnored) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("hup", {0.05, 0.06, 0.07, 0.08}, 150, 60000));
+  const std::string db = d.file("demcal.db");
+  pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  ASSERT_TRUE(one_task_seen_running(db, "hup")) << "no task was seen running within 60 s";
+  kill(runner, SIGHUP);
+  Result r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("hung up (SIGHUP: the terminal or session closed): stopping 1 running task(s)"), std::string::npos)
+      << r.err;
+  auto rows = tasks_of(db, "hup");
+  EXPECT_EQ(count_status(rows, "running"), 0);
+  EXPECT_GE(count_status(rows, "pending"), 1);
+  // `trap '' HUP` is what nohup does: the run ignores the hangup and finishes.
+  runner = spawn_program({"bash", "-c", "trap '' HUP; exec \"$0\" run j.json --workers 1", DEMCAL_BIN}, d.path.string());
+  ASSERT_TRUE(one_task_seen_running(db, "hup")) << "no task was seen running within 60 s";
+  kill(runner, SIGHUP);
+  r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(count_status(tasks_of(db, "hup"), "done"), 4);
+}
+
 TEST(Runner, AReaderThatGoesAwayDoesNotStopTheRun) {
   // `demcal run JOB | head`: the reader closes the pipe after a few lines. SIGPIPE
   // killed the runner and left its task 'running' under a dead runner.

@@ -68,12 +68,14 @@ TEST(CollisionScene, EnergyGainedBelowTheCriticalStepStopsTheRun) {
   const CollisionResult off = run_collision(c);
   ASSERT_TRUE(off.outcome.ok()) << off.outcome.message;
   EXPECT_GT(off.energy_final / off.energy_initial - 1.0, 0.02);
-  // The default step stays far from the guard.
+  // The default step stays far from the guard: within a quarter of it. (The error of
+  // a chaotic gas moves with the rounding of the build: 3.2e-3 in an SSE2 build,
+  // -DDEMCAL_NATIVE=OFF, below 2e-3 in the AVX2 and AVX-512 ones.)
   c = small();
   c.steps = 100000;
   const CollisionResult fine = run_collision(c);
   ASSERT_TRUE(fine.outcome.ok()) << fine.outcome.message;
-  EXPECT_LT(fine.max_relative_error, 2e-3);
+  EXPECT_LT(fine.max_relative_error, 0.25 * c.energy_guard);
 }
 
 TEST(CollisionScene, TheForecastStepAndLimitAreTheRunsBeforeAnyGrainExists) {

@@ -366,41 +366,65 @@ TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
   EXPECT_LE(static_cast<double>(r.steps), c.max_steps());
 }
 
+// Which packing keeps rattlers to the time limit, and which heap has a slope to judge
+// at a given moment, depend on the trajectory, and so on the rounding of the build
+// (-march=native on another CPU, or -DDEMCAL_NATIVE=OFF): the next two tests try a
+// few seeds and judge every run whose premise holds, and at least one must hold.
 TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {
-  // Seed 1 at eta = 0.3: three grains bouncing in the rough floor's hollows keep the
-  // flow kinetic energy 16x above the rest threshold to the time limit, undamped as
-  // the seed's law is, while the heap itself has stopped.
-  ReposeConfig c = cheap(30.0, 0.3);
-  c.seed = 1;
-  const ReposeResult r = run_repose(c);
-  report("rattlers, profile", r);
-  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
-  EXPECT_TRUE(r.rest_by_profile);
-  EXPECT_LE(r.profile_angle_change_deg, c.rest_profile_tol_deg);
-  EXPECT_LE(r.profile_front_change_m, r.bin_width);
-  EXPECT_GT(r.energy.rows.back()[r.energy.column("ke_flow_per_grain")], r.rest_ke_J);
-  EXPECT_NEAR(r.time_to_rest_s, c.time_limit - c.rest_profile_window, 2 * c.sample_interval);
-  ASSERT_EQ(r.outcome.warnings.size(), 1u);
-  EXPECT_NE(r.outcome.warnings[0].find("at rest by its profile"), std::string::npos) << r.outcome.warnings[0];
-  EXPECT_NE(r.outcome.warnings[0].find("rattlers"), std::string::npos) << r.outcome.warnings[0];
-  // The angle is the one the final profile gives, and the series' last row agrees.
-  EXPECT_TRUE(std::isfinite(r.repose_deg));
-  EXPECT_NEAR(r.energy.rows.back()[r.energy.column("repose_deg")], r.repose_deg, 1e-9);
-  bool flagged = false;
-  for (const auto& [k, v] : r.metrics()) flagged |= k == "rest_by_profile" && v == 1.0;
-  EXPECT_TRUE(flagged);
+  // Seed 1 at eta = 0.3 (AVX2 and AVX-512 builds): three grains bouncing in the rough
+  // floor's hollows keep the flow kinetic energy 16x above the rest threshold to the
+  // time limit, undamped as the seed's law is, while the heap itself has stopped.
+  int judged = 0;
+  for (const std::uint64_t seed : {1, 2, 3, 4}) {
+    ReposeConfig c = cheap(30.0, 0.3);
+    c.seed = seed;
+    c.rest_trim = 0.0;  // no grain left out of the energy check: one rattler keeps it up
+    const ReposeResult r = run_repose(c);
+    report(("rattlers, profile, seed " + std::to_string(seed)).c_str(), r);
+    ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+    if (r.energy.rows.back()[r.energy.column("ke_flow_per_grain")] <= r.rest_ke_J) {
+      EXPECT_FALSE(r.rest_by_profile) << "at rest by its energy: the profile is not needed";
+      continue;  // no rattlers in this packing
+    }
+    ++judged;
+    EXPECT_TRUE(r.rest_by_profile);
+    EXPECT_LE(r.profile_angle_change_deg, c.rest_profile_tol_deg);
+    EXPECT_LE(r.profile_front_change_m, r.bin_width);
+    EXPECT_NEAR(r.time_to_rest_s, c.time_limit - c.rest_profile_window, 2 * c.sample_interval);
+    ASSERT_EQ(r.outcome.warnings.size(), 1u);
+    EXPECT_NE(r.outcome.warnings[0].find("at rest by its profile"), std::string::npos) << r.outcome.warnings[0];
+    EXPECT_NE(r.outcome.warnings[0].find("rattlers"), std::string::npos) << r.outcome.warnings[0];
+    // The angle is the one the final profile gives, and the series' last row agrees.
+    EXPECT_TRUE(std::isfinite(r.repose_deg));
+    EXPECT_NEAR(r.energy.rows.back()[r.energy.column("repose_deg")], r.repose_deg, 1e-9);
+    bool flagged = false;
+    for (const auto& [k, v] : r.metrics()) flagged |= k == "rest_by_profile" && v == 1.0;
+    EXPECT_TRUE(flagged);
+    break;
+  }
+  EXPECT_EQ(judged, 1) << "no seed left rattlers at the time limit";
 }
 
 TEST(ReposeScene, AHeapStillFlowingIsNotJudgedAtRestByItsProfile) {
-  ReposeConfig c = cheap(30.0, 0.1);
-  c.time_limit = 0.15;  // the column is still spreading
-  c.rest_profile_window = 0.05;
-  const ReposeResult r = run_repose(c);
-  report("flowing, profile", r);
-  EXPECT_EQ(r.outcome.status, SceneStatus::not_settled) << r.outcome.message;
-  EXPECT_FALSE(r.rest_by_profile);
-  EXPECT_GT(r.profile_front_change_m + r.profile_angle_change_deg, 0.0);
-  EXPECT_NE(r.outcome.message.find("the heap's angle moved by"), std::string::npos) << r.outcome.message;
+  int judged = 0;
+  for (const std::uint64_t seed : {8, 9, 10}) {
+    ReposeConfig c = cheap(30.0, 0.1);
+    c.seed = seed;
+    c.time_limit = 0.15;  // the column is still spreading
+    c.rest_profile_window = 0.05;
+    const ReposeResult r = run_repose(c);
+    report(("flowing, profile, seed " + std::to_string(seed)).c_str(), r);
+    EXPECT_EQ(r.outcome.status, SceneStatus::not_settled) << r.outcome.message;
+    EXPECT_FALSE(r.rest_by_profile);
+    // Early in the window the spreading heap may have no slope to fit yet: then the
+    // message says the profile was not judged, and another seed is tried.
+    if (r.outcome.message.find("the heap's profile was not judged") != std::string::npos) continue;
+    ++judged;
+    EXPECT_GT(r.profile_front_change_m + r.profile_angle_change_deg, 0.0);
+    EXPECT_NE(r.outcome.message.find("the heap's angle moved by"), std::string::npos) << r.outcome.message;
+    break;
+  }
+  EXPECT_EQ(judged, 1) << "no seed gave a heap whose profile could be judged";
 }
 
 // A column a few grains across (5-6 mm: ~20-34 grains) leaves a heap whose "slope"
@@ -412,7 +436,10 @@ TEST(ReposeScene, AHeapStillFlowingIsNotJudgedAtRestByItsProfile) {
 TEST(ReposeScene, AHeapTooSmallForASlopeIsWarned) {
   const auto warned = [](const ReposeResult& x) {
     return std::any_of(x.outcome.warnings.begin(), x.outcome.warnings.end(),
-                       [](const std::string& w) { return w.find("profile bins, fewer than 6") != std::string::npos; });
+                       [](const std::string& w) {
+                         return w.find("profile bins, fewer than 6") != std::string::npos ||
+                                w.find("no angle of repose") != std::string::npos;  // one bin or none
+                       });
   };
   int too_few = 0;
   for (const double width : {0.005, 0.006}) {

@@ -454,6 +454,9 @@ const std::vector<Bad>& bad_cases() {
       {"repose_time_limit_below_default_min_collapse", true, [](json& j) { j["repose"]["time_limit"] = 0.001; }, "repose.time_limit"},
       {"repose_stiffness_scale_above_one", true, [](json& j) { j["repose"]["stiffness_scale"] = 2; }, "repose.stiffness_scale"},
       {"repose_fit_window_inverted", true, [](json& j) { j["repose"]["fit_lo"] = 0.8; j["repose"]["fit_hi"] = 0.5; }, "repose.fit_hi"},
+      // fit_hi left at its default: the fit_lo the job wrote is named, in the grid too.
+      {"repose_fit_lo_above_default_hi", true, [](json& j) { j["repose"]["fit_lo"] = 0.9; }, "repose.fit_lo"},
+      {"repose_fit_lo_axis_above_default_hi", true, [](json& j) { j["grid"]["fit_lo"] = {0.2, 0.9}; }, "grid.fit_lo[1]"},
       {"repose_time_limit_negative", true, [](json& j) { j["repose"]["time_limit"] = -1; }, "repose.time_limit"},
       {"repose_min_collapse_beyond_limit", true, [](json& j) { j["repose"]["time_limit"] = 0.1; j["repose"]["min_collapse_time"] = 0.2; }, "repose.min_collapse_time"},
       {"repose_rest_trim_large", true, [](json& j) { j["repose"]["rest_trim"] = 0.5; }, "repose.rest_trim"},
