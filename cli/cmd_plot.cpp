@@ -40,6 +40,21 @@ std::vector<std::string> split_commas(const std::string& s) {
   return out;
 }
 
+// The database and its demcal-out/ moved together (a cluster's results copied to a
+// laptop): the stored path, absolute, names the old place. The same file under the
+// database's own demcal-out/ is taken; the task key check below keeps it honest.
+std::string moved_with_the_database(const std::string& h5, const std::string& db) {
+  namespace fs = std::filesystem;
+  if (fs::exists(h5)) return h5;
+  const std::string mark = "/demcal-out/";
+  const auto at = h5.rfind(mark);
+  if (at == std::string::npos) return h5;
+  const fs::path here = fs::path(default_out_dir(db)) / h5.substr(at + mark.size());
+  if (!fs::exists(here)) return h5;
+  std::cerr << "note: the task's HDF5 file is not at " << h5 << " any more; reading " << here.string()
+            << " (demcal-out/ next to the database)\n";
+  return here.string();
+}
 }  // namespace
 
 void add_plot(CLI::App& app, int& exit_code) {
@@ -68,9 +83,10 @@ void add_plot(CLI::App& app, int& exit_code) {
       db::Store store(a->db, /*read_only=*/true);
       const auto task = store.task(a->task);
       if (!task) throw jobs::JobError("TASK", "no task with id " + std::to_string(a->task));
-      const std::string h5 = jobs::task_hdf5(store, a->task);
+      std::string h5 = jobs::task_hdf5(store, a->task);
       if (h5.empty())
         throw jobs::JobError("TASK", "task " + std::to_string(a->task) + " has no stored series (status " + task->status + ")");
+      h5 = moved_with_the_database(h5, a->db);
       // The file must be this task's: a file at that path written for another task
       // (an output folder shared with another database) would plot the wrong run.
       if (std::filesystem::exists(h5)) {
@@ -104,9 +120,18 @@ void add_plot(CLI::App& app, int& exit_code) {
         if (a->x.empty()) a->x = d->x;
         if (a->y.empty()) a->y = split_commas(d->y);
       }
-      jobs::PlotRequest r{h5, a->series, a->x, a->y, a->out, "task " + std::to_string(a->task) + ": " + a->series};
+      // A failed task's series is what it wrote before it stopped: the chart says so.
+      const bool failed = task->status != "done";
+      jobs::PlotRequest r{h5, a->series, a->x, a->y, a->out,
+                          "task " + std::to_string(a->task) + ": " + a->series + (failed ? " (task " + task->status + ")" : "")};
       jobs::plot_series(r);
       std::cout << a->out << "\n";
+      if (failed) {
+        const std::string why = db::task_message(*task).error;
+        std::cout << "note: task " << a->task << " is " << task->status
+                  << (why.empty() ? std::string() : " (" + why + ")")
+                  << "; the series is what it wrote before it stopped\n";
+      }
       return kOk;
     });
   });

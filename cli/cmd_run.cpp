@@ -11,6 +11,7 @@
 #include "jobs/mpi_runner.hpp"
 #endif
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
 #include <unistd.h>
@@ -71,7 +72,12 @@ int run(const RunArgs& a) {
               << " --where task=ID). Give one of the two jobs another name to keep both\n";
     return kRuntime;
   }
-  const int hidden = jobs::print_rows(std::cout, jobs::select_rows(store, job.name, {}), {}, format);
+  std::vector<jobs::ResultRow> rows = jobs::select_rows(store, job.name, {});
+  // A shard shows its own part, as it counts it: other shards may share the database.
+  rows.erase(std::remove_if(rows.begin(), rows.end(),
+                            [&](const jobs::ResultRow& r) { return !shard.contains(static_cast<std::size_t>(r.task.index)); }),
+             rows.end());
+  const int hidden = jobs::print_rows(std::cout, rows, {}, format);
   if (hidden > 0)
     std::cout << "(" << hidden << " more metrics per task: demcal query --db " << a.db << " --job " << job.name
               << " --metrics all, or --format csv or json)\n";

@@ -764,6 +764,14 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
   res.cv_effective_samples = est.effective_samples;
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
+  // sigma1 below sigma3 on average over the window: no granular material's critical
+  // state, a sample too small or sheared too fast to carry one (50 grains at aspect
+  // ratio 4 read -0.6 deg).
+  if (res.phi_cv_deg < 0.0)
+    res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) +
+                                   " deg): the axial stress fell below the confining one over the critical-state "
+                                   "window, which no critical state does; the sample is too small or sheared too "
+                                   "fast to have one (more triaxial.particles, a lower strain_rate)");
 }
 
 // Final state and the largest dilatancy angle over any dilatancy_window of strain.

@@ -600,6 +600,48 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   EXPECT_FALSE(fs::exists(d.file("g.png")));
 }
 
+// A failed task's chart says it failed; a database moved together with its
+// demcal-out/ (cluster to laptop) still plots, from the folder beside it.
+TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
+  TempDir d;
+  fs::create_directories(d.path / "a");
+  write(d.file("a/j.json"), collision_job("guard", {0.1, 1.3}, 300, 100000));  // 1.3: energy gained, stopped
+  Result r = run_demcal({"run", "j.json", "--workers", "1", "--db", "x.db"}, d.file("a"));
+  ASSERT_EQ(r.rc, 1) << r.err;
+  fs::rename(d.path / "a", d.path / "b");
+  r = run_demcal({"plot", "2", "--db", "b/x.db", "--series", "energy", "--out", "e.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("/a/demcal-out/guard/"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("reading " + fs::canonical(d.path / "b").string() + "/demcal-out/guard/"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("note: task 2 is failed (unstable"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("e.svg")).find("task 2: energy (task failed)"), std::string::npos);
+  r = run_demcal({"plot", "1", "--db", "b/x.db", "--series", "energy", "--out", "ok.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(r.out.find("note:"), std::string::npos) << r.out;
+  EXPECT_EQ(slurp(d.file("ok.svg")).find("(task"), std::string::npos);
+}
+
+// 50 grains in a box four times as tall as wide: over the critical-state window the
+// axial stress falls below the confining one, and the negative phi_cv that gives is
+// no critical state: the task says so (fit then counts it among warned results).
+TEST(Cli, ANegativeCriticalStateAngleIsWarned) {
+  TempDir d;
+  nlohmann::json j = nlohmann::json::parse(slurp(std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"));
+  j["name"] = "tall";
+  j["triaxial"]["particles"] = 50;
+  j["grid"] = {{"aspect_ratio", {4}}};
+  j["threads"] = 1;
+  write(d.file("j.json"), j.dump());
+  ASSERT_EQ(run_demcal({"run", "j.json", "--workers", "1"}, d.path.string()).rc, 0);
+  const Result q = run_demcal({"query", "--format", "json", "--metrics", "phi_cv_deg"}, d.path.string());
+  const nlohmann::json rows = nlohmann::json::parse(q.out);
+  ASSERT_EQ(rows.size(), 1u) << q.out;
+  const double cv = rows[0]["metrics"]["phi_cv_deg"].get<double>();
+  const bool warned = rows[0].value("warning", "").find("phi_cv is negative") != std::string::npos;
+  EXPECT_EQ(warned, cv < 0) << cv << ": " << q.out;
+  EXPECT_LT(cv, 5.0) << "not the degenerate sample this test is about";
+}
+
 TEST(Cli, AnOutputFolderThatCannotBeWrittenWritesNoDatabase) {
   TempDir d;
   write(d.file("j.json"), collision_job("small", {0.1}));

@@ -47,6 +47,10 @@ TEST(Distribute, ShardsPlusMergeEqualUnshardedRun) {
   EXPECT_EQ(copy.rc, 0) << copy.err;
   EXPECT_NE(copy.err.find("3 of 3 task(s) already done"), std::string::npos) << copy.err;
   EXPECT_NE(copy.err.find("3 done (3 reused), 0 failed, 0 unfinished, of 3"), std::string::npos) << copy.err;
+  // ... and its table shows those three (indices 0, 3, 6: the table's first column is
+  // the task id, one more than the index here), not the job's seven.
+  EXPECT_EQ(std::count(copy.out.begin(), copy.out.end(), '\n'), 1 + 3 + 1) << copy.out;  // header, rows, hint
+  for (const char* id : {"\n1 ", "\n4 ", "\n7 "}) EXPECT_NE(copy.out.find(id), std::string::npos) << id << copy.out;
 
   const Result m = run_demcal({"merge", "part-1.db", "part-2.db", "part-3.db", "--into", "merged.db"}, d.path.string());
   ASSERT_EQ(m.rc, 0) << m.err;
