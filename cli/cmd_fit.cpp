@@ -84,7 +84,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--target", a->targets, "METRIC=VALUE (phi_peak, phi_cv, phi_diff, repose, or a stored metric); repeatable")
       ->required();
   cmd->add_option("--sigma", a->sigmas, "METRIC=SIGMA: the target's own uncertainty (e.g. the laboratory's), added in quadrature to the surrogate's error (default: 0, an exact target)");
-  cmd->add_option("--job", a->jobs, "job(s) to read (default: the job storing each metric); repeatable");
+  cmd->add_option("--job", a->jobs, "job(s) to read (default: the job storing each metric); repeatable")->check(kNonEmpty);
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--refine", a->refine, "rounds of DEM runs around the answer, refitting after each")->transform(kWholeNumber)->check(CLI::Range(0, 20));

@@ -24,8 +24,8 @@ void add_map(CLI::App& app, int& exit_code) {
     bool no_fit = false;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--metric", a->metric, "phi_peak, phi_cv, phi_diff, repose, or a stored metric")->required();
-  cmd->add_option("--job", a->job, "job to draw (default: the job storing the metric)");
+  cmd->add_option("--metric", a->metric, "phi_peak, phi_cv, phi_diff, repose, or a stored metric")->required()->check(kNonEmpty);
+  cmd->add_option("--job", a->job, "job to draw (default: the job storing the metric)")->check(kNonEmpty);
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)")->check(kPlainPath);
@@ -88,7 +88,7 @@ void add_envelope(CLI::App& app, int& exit_code) {
     std::vector<std::string> where;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--job", a->job, "triaxial job spanning several confining_kpa (default: the only job)");
+  cmd->add_option("--job", a->job, "triaxial job spanning several confining_kpa (default: the only job)")->check(kNonEmpty);
   cmd->add_option("--where", a->where, "KEY=VALUE pinning another parameter; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->callback([a, &exit_code] {

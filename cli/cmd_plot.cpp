@@ -67,9 +67,9 @@ void add_plot(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<Args>();
   cmd->add_option("TASK", a->task, "task id (the first column of demcal query)")->required()->transform(kTaskId);
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
-  cmd->add_option("--series", a->series, "series name, e.g. energy")->required();
-  cmd->add_option("--x", a->x, "column for the x axis, e.g. step (default for the scenes' own series: triaxial eps1, energy step or time, profile x)");
-  cmd->add_option("--y", a->y, "columns to draw (comma separated), e.g. total,kinetic (default: triaxial phi_mob_deg,eps_v; energy total,kinetic,elastic or the kinetic energy per grain; profile h)")->delimiter(',');
+  cmd->add_option("--series", a->series, "series name, e.g. energy")->required()->check(kNonEmpty);
+  cmd->add_option("--x", a->x, "column for the x axis, e.g. step (default for the scenes' own series: triaxial eps1, energy step or time, profile x)")->check(kNonEmpty);
+  cmd->add_option("--y", a->y, "columns to draw (comma separated), e.g. total,kinetic (default: triaxial phi_mob_deg,eps_v; energy total,kinetic,elastic or the kinetic energy per grain; profile h)")->delimiter(',')->check(kNonEmpty);
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: taskID-SERIES.png)")->check(kPlainPath);
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {

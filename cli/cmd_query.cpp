@@ -15,9 +15,9 @@ void add_query(CLI::App& app, int& exit_code) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
-  cmd->add_option("--job", a->job, "only this job's tasks");
+  cmd->add_option("--job", a->job, "only this job's tasks")->check(kNonEmpty);
   cmd->add_option("--where", a->where, "KEY=VALUE on a task parameter (or status); repeatable, and a task must match every one");
-  cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated), or all; default: every metric in CSV and JSON, the scene's headline metrics in a table")->delimiter(',');
+  cmd->add_option("--metrics", a->metrics, "metrics to show (comma separated), or all; default: every metric in CSV and JSON, the scene's headline metrics in a table")->delimiter(',')->check(kNonEmpty);
   cmd->add_option("--format", a->format, "table, csv or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
     exit_code = guarded("", [&] {

@@ -113,7 +113,7 @@ void add_status(CLI::App& app, int& exit_code) {
   auto db = std::make_shared<std::string>("demcal.db");
   auto job = std::make_shared<std::string>();
   cmd->add_option("--db", *db, "SQLite database")->check(kDbPath)->capture_default_str();
-  cmd->add_option("--job", *job, "only this job");
+  cmd->add_option("--job", *job, "only this job")->check(kNonEmpty);
   cmd->callback([db, job, &exit_code] {
     exit_code = guarded("", [&] {
       require_db(*db);

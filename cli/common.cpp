@@ -107,6 +107,9 @@ const CLI::Validator kOneLine(
     },
     "", "one line of text");
 
+const CLI::Validator kNonEmpty([](std::string& text) { return text.empty() ? std::string("must not be empty") : std::string(); },
+                               "", "not empty");
+
 const CLI::Validator kDbPath(
     [](std::string& path) {
       if (std::string e = plain_path_error(path); !e.empty()) return e;

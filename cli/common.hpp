@@ -41,6 +41,8 @@ extern const CLI::Validator kDbPath;
 // One line of UTF-8 text (a chart title): gnuplot's title ends at a newline, and
 // the SVG must be valid.
 extern const CLI::Validator kOneLine;
+// Not empty: `--job ''` read as no filter at all, `--x ''` as the default column.
+extern const CLI::Validator kNonEmpty;
 // A finite number: CLI11's ranges let NaN through.
 extern const CLI::Validator kFinite;
 extern const CLI::Validator kTaskId;  // a positive int64 in decimal; attach with transform()

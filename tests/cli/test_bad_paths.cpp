@@ -156,6 +156,27 @@ TEST(BadPaths, TheCommandLinesOwnRefusalsReadLikeDemcals) {
   EXPECT_FALSE(fs::exists(d.file("demcal.db")));
 }
 
+// An empty name is a slip, not "no filter" (query --job '' listed every job) nor "the
+// default" (plot --x '' drew the default column). (An empty item inside a list,
+// "a,,b", CLI11 drops by itself.)
+TEST(BadPaths, EmptyNamesInOptionsAreRefused) {
+  TempDir d;
+  const std::vector<std::vector<std::string>> cases = {
+      {"query", "--job", ""},          {"status", "--job", ""},
+      {"query", "--metrics", ""},
+      {"map", "--metric", ""},         {"map", "--metric", "phi_peak", "--job", ""},
+      {"envelope", "--job", ""},       {"fit", "--target", "phi_peak=40", "--job", ""},
+      {"plot", "1", "--series", ""},   {"plot", "1", "--series", "energy", "--x", ""},
+      {"plot", "1", "--series", "energy", "--y", ""},
+  };
+  for (const auto& args : cases) {
+    const Result r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 2) << args[0] << " " << args[1] << " " << args[2];
+    EXPECT_NE(r.err.find(": must not be empty"), std::string::npos) << r.err;
+  }
+  EXPECT_TRUE(fs::is_empty(d.path / "out.stdout"));
+}
+
 TEST(BadPaths, ADamagedDemcalDatabaseIsRefusedUntouched) {
   TempDir d;
   two_databases(d);
