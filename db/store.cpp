@@ -157,10 +157,15 @@ std::int64_t Store::put_job(const std::string& name, const std::string& spec_jso
 std::vector<TaskRow> Store::tasks(const std::string& job) {
   std::vector<TaskRow> out;
   if (job.empty()) {
-    // Every task once, listed under the job that created it.
+    // Every task once, listed under the job that created it while that job holds it,
+    // else under the first job that does (an edited job drops tasks it made; another
+    // job may still share them), else under its creator with no index.
     const std::string sql = std::string("SELECT ") + kTaskColumns +
-                            ", j.name, (SELECT min(idx) FROM job_tasks jt WHERE jt.task_id = t.id AND jt.job_id = t.job_id)"
-                            " FROM tasks t JOIN jobs j ON j.id = t.job_id ORDER BY t.id";
+                            ", j.name, (SELECT min(idx) FROM job_tasks jt WHERE jt.task_id = t.id AND jt.job_id = t.shown)"
+                            " FROM (SELECT *, COALESCE((SELECT jt.job_id FROM job_tasks jt WHERE jt.task_id = tasks.id"
+                            " AND jt.job_id = tasks.job_id), (SELECT min(jt.job_id) FROM job_tasks jt WHERE jt.task_id ="
+                            " tasks.id), tasks.job_id) AS shown FROM tasks) t"
+                            " JOIN jobs j ON j.id = t.shown ORDER BY t.id";
     Statement s = conn_.prepare(sql.c_str());
     while (s.step()) {
       TaskRow r = read_task(s);

@@ -690,6 +690,13 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
   const Result reworded = run_demcal({"run", "e.json"}, d.path.string());
   ASSERT_EQ(reworded.rc, 0) << reworded.err;
   EXPECT_EQ(reworded.err.find("spec differs"), std::string::npos) << reworded.err;
+  // The task "small" dropped (dt_factor 0.1, task 2) joins another job: the unfiltered
+  // listing names that job, not its creator that no longer holds it.
+  write(d.file("o.json"), collision_job("other", {0.1}));
+  ASSERT_EQ(run_demcal({"run", "o.json"}, d.path.string()).rc, 0);
+  const Result all = run_demcal({"query", "--format", "csv", "--metrics", "dt"}, d.path.string());
+  EXPECT_NE(all.out.find("\n2,other,done,"), std::string::npos) << all.out;
+  EXPECT_NE(all.out.find("\n1,small,done,"), std::string::npos) << all.out;
 }
 
 // The same job file after an upgrade that changed a scene's physics (every key moves):
