@@ -297,8 +297,8 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
         << " (frictionless, normal mode) and " << fmt(s.critical_factor_full) << " (" << s.critical_mode_full
         << ")";
     if (s.capped_at_critical)
-      rec << "; larger factors drifted within the tolerance too, but lie past the critical step of the full law, "
-             "which the engine refuses for a job";
+      rec << "; the next factor's frictionless runs drifted within the tolerance too, but it lies past the critical "
+             "step of the full law, which the engine refuses for a job";
   } else {
     rec << "no dt_factor passed: every factor drifted by more than " << fmt(s.tolerance)
         << " per simulated second or went unstable";

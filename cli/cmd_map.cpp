@@ -30,7 +30,8 @@ void add_map(CLI::App& app, int& exit_code) {
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->add_option("--out", a->out, "output file, .png or .svg (default: map_METRIC.png)")->check(kPlainPath);
   cmd->add_option("--title", a->title, "the chart's title, one line (default: metric, job, points and holes, then the surrogate)")
-      ->check(kOneLine);
+      ->check(kOneLine)
+      ->check(kNonEmpty);
   cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
   cmd->callback([a, &exit_code] {
     const auto body = [&] {

@@ -129,8 +129,8 @@ void add_plot(CLI::App& app, int& exit_code) {
       if (failed) {
         const std::string why = db::task_message(*task).error;
         std::cout << "note: task " << a->task << " is " << task->status
-                  << (why.empty() ? std::string() : " (" + why + ")")
-                  << "; the series is what it wrote before it stopped\n";
+                  << (why.empty() ? std::string() : " (" + why + ")") << "; the series is what it wrote "
+                  << (task->status == "failed" ? "before it stopped" : "so far") << "\n";
       }
       return kOk;
     });

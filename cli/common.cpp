@@ -164,7 +164,9 @@ const CLI::Validator kWholeNumber(
       // from_chars takes a '-' but no '+'; a '+' the user typed is as good as none.
       const char* first = text.data() + (text.size() > 1 && text[0] == '+' && text[1] != '-' ? 1 : 0);
       const auto [end, ec] = std::from_chars(first, text.data() + text.size(), v);
-      const bool ok = ec == std::errc() && end == text.data() + text.size();
+      const bool whole = end == text.data() + text.size() && end != first;
+      if (whole && ec == std::errc::result_out_of_range) return "is out of range, got " + text;
+      const bool ok = ec == std::errc() && whole;
       if (ok) text = std::to_string(v);
       return ok ? std::string() : "must be a whole number in decimal digits, got \"" + text + "\"";
     },

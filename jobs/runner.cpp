@@ -65,7 +65,7 @@ class Runner {
   void handle_exit(const Running& r, int wstatus, bool stopping);
   void stop_all();
   RunSummary run_loop();
-  // The database could not be written (a full disk): the workers are stopped without
+  // The database could not be written (a full disk, a lock): the workers are stopped without
   // storing anything, this run's tasks go back to pending if the database still
   // takes that, and the error is rethrown saying what became of them.
   [[noreturn]] void abandon(const db::DbError& e);
@@ -411,7 +411,8 @@ RunSummary Runner::run() {
 
 void Runner::abandon(const db::DbError& e) {
   const std::size_t stopped = running_.size();
-  const std::string unstored = unstored_.empty() ? "" : unstored_ + ", but its result could not be stored; ";
+  std::string what = unstored_.empty() ? "" : unstored_ + ", but its result could not be stored; ";
+  if (stopped > 0) what += std::to_string(stopped) + " running task(s) were stopped; ";
   for (const auto& r : running_) kill(r.pid, SIGTERM);
   for (const auto& r : running_) {
     int st = 0;
@@ -421,16 +422,15 @@ void Runner::abandon(const db::DbError& e) {
   }
   running_.clear();
   progress_.finish();
-  std::string fate;
   try {
     const int n = store_.requeue_dead([&](const std::string& worker) { return worker != token_; });
-    fate = std::to_string(n) + " task(s) this run held are back in the queue";
+    if (n > 0) what += std::to_string(n) + " task(s) this run held are back in the queue; ";
   } catch (const std::exception&) {
-    fate = "the tasks this run held are left 'running', and the next run of the job puts them back in the queue";
+    what += "the tasks this run held are left 'running', and the next run of the job puts them back in the queue; ";
   }
-  throw db::DbError(std::string(e.what()) + " (the run stopped: " + unstored + std::to_string(stopped) +
-                        " other running task(s) were stopped; " + fate +
-                        "; free the space or fix the database, then run the job again: finished tasks are kept)",
+  // Any error of the database's: a full disk, a lock held past the busy timeout, damage.
+  throw db::DbError(std::string(e.what()) + " (the run stopped: " + what +
+                        "once the database can be written again, run the job again: finished tasks are kept)",
                     e.bad_input());
 }
 

@@ -151,8 +151,10 @@ void note_radian_angles(ParamSet& out) {
   if (!(largest > 0.0 && largest <= std::acos(0.0))) return;
   std::ostringstream os;
   os.precision(3);
-  os << where << ": every value is at most " << largest << ", and theta is in degrees (a near frictionless material); "
-     << "if these are radians, " << largest << " rad is " << largest * 90.0 / std::acos(0.0) << " degrees";
+  const bool one = given.size() == 1;
+  os << where << (one ? ": the value " : ": every value is at most ") << largest << (one ? " is at most pi/2" : "")
+     << ", and theta is in degrees (a near frictionless material); if " << (one ? "it is" : "these are")
+     << " radians, " << largest << " rad is " << largest * 90.0 / std::acos(0.0) << " degrees";
   out.notes.push_back(os.str());
 }
 

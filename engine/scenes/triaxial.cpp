@@ -765,12 +765,13 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.cv_effective_samples = est.effective_samples;
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
   // sigma1 below sigma3 on average over the window: no granular material's critical
-  // state, a sample too small or sheared too fast to carry one (50 grains at aspect
-  // ratio 4 read -0.6 deg).
+  // state, frictionless grains included, but a sample too small or sheared too fast to
+  // carry one (50 frictionless grains at aspect ratio 4 read -0.6 +- 2.9 deg). No "; "
+  // inside: a task's warnings are joined with it.
   if (res.phi_cv_deg < 0.0)
-    res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) +
+    res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
                                    " deg): the axial stress fell below the confining one over the critical-state "
-                                   "window, which no critical state does; the sample is too small or sheared too "
+                                   "window, which no critical state does, so the sample is too small or sheared too "
                                    "fast to have one (more triaxial.particles, a lower strain_rate)");
 }
 

@@ -621,9 +621,12 @@ TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
   EXPECT_EQ(slurp(d.file("ok.svg")).find("(task"), std::string::npos);
 }
 
-// 50 grains in a box four times as tall as wide: over the critical-state window the
-// axial stress falls below the confining one, and the negative phi_cv that gives is
-// no critical state: the task says so (fit then counts it among warned results).
+// 50 frictionless grains (the quickstart's grid, over theta and eta, is replaced) in a
+// box four times as tall as wide: over the critical-state window the axial stress
+// falls below the confining one (-0.6 +- 2.9 deg on a Zen 4), and a negative phi_cv is
+// no critical state: the task says so (fit then counts it among warned results). Where
+// another CPU's trajectory gives a phi_cv of 0-5 deg, the test checks only that
+// nothing is said.
 TEST(Cli, ANegativeCriticalStateAngleIsWarned) {
   TempDir d;
   nlohmann::json j = nlohmann::json::parse(slurp(std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"));
@@ -637,7 +640,10 @@ TEST(Cli, ANegativeCriticalStateAngleIsWarned) {
   const nlohmann::json rows = nlohmann::json::parse(q.out);
   ASSERT_EQ(rows.size(), 1u) << q.out;
   const double cv = rows[0]["metrics"]["phi_cv_deg"].get<double>();
-  const bool warned = rows[0].value("warning", "").find("phi_cv is negative") != std::string::npos;
+  const std::string warning = rows[0].value("warning", "");
+  const bool warned = warning.find("phi_cv is negative") != std::string::npos;
+  if (warned)  // one warning among the task's, which are joined with "; "
+    EXPECT_NE(warning.find("which no critical state does, so the sample is too small"), std::string::npos) << warning;
   EXPECT_EQ(warned, cv < 0) << cv << ": " << q.out;
   EXPECT_LT(cv, 5.0) << "not the degenerate sample this test is about";
 }

@@ -179,6 +179,25 @@ TEST(Runner, SighupStopsRunningTasksForRetryUnlessIgnored) {
   EXPECT_EQ(count_status(tasks_of(db, "hup"), "done"), 4);
 }
 
+// A database that stops taking writes (here a file-size limit, as a full disk does)
+// stops the run with what became of its tasks, and a run after it finishes the job.
+TEST(Runner, ADatabaseThatCannotBeWrittenStopsTheRunAndTheNextRunFinishes) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("full", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.11, 0.12}));
+  // 200 KiB: the database's log outgrows it after a few tasks; the HDF5 files do not.
+  const pid_t limited = spawn_program(
+      {"bash", "-c", "trap '' XFSZ; ulimit -f 200; exec \"$0\" run j.json --workers 1", DEMCAL_BIN}, d.path.string());
+  const Result r = finish(limited, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("demcal: error: "), r.err.find("demcal: error: ")) << "one error line: " << r.err;
+  EXPECT_NE(r.err.find("(the run stopped: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("run the job again: finished tasks are kept)"), std::string::npos) << r.err;
+  const Result again = run_demcal({"run", "j.json", "--workers", "1"}, d.path.string());
+  EXPECT_EQ(again.rc, 0) << again.err;
+  const auto rows = tasks_of(d.file("demcal.db"), "full");
+  EXPECT_EQ(count_status(rows, "done"), 8);
+}
+
 TEST(Runner, AReaderThatGoesAwayDoesNotStopTheRun) {
   // `demcal run JOB | head`: the reader closes the pipe after a few lines. SIGPIPE
   // killed the runner and left its task 'running' under a dead runner.

@@ -108,13 +108,13 @@ TEST(CliStudy, TimestepRecommendationFollowsItsRule) {
 
   // A tolerance so loose that factors past the critical step pass too (the dilute gas's
   // brief contacts survive them): the recommendation stops below it and says why.
-  const Result loose = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "c", "--tolerance", "50"},
+  const Result loose = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "c", "--tolerance", "1000"},
                                   d.path.string());
   ASSERT_EQ(loose.rc, 0) << loose.err << loose.out;
   const auto rec = loose.out.find("recommended dt_factor ");
   ASSERT_NE(rec, std::string::npos) << loose.out;
   EXPECT_LE(std::stod(loose.out.substr(rec + 22)), critical_full) << loose.out;
-  EXPECT_NE(loose.out.find("lie past the critical step of the full law"), std::string::npos) << loose.out;
+  EXPECT_NE(loose.out.find("but it lies past the critical step of the full law"), std::string::npos) << loose.out;
 }
 
 TEST(CliStudy, GrazingQuickChartsTheEnergyRatio) {

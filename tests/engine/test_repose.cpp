@@ -371,9 +371,10 @@ TEST(ReposeScene, TimeLimitGivesNotSettledAndNoAngle) {
 // (-march=native on another CPU, or -DDEMCAL_NATIVE=OFF): the next two tests try a
 // few seeds and judge every run whose premise holds, and at least one must hold.
 TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {
-  // Seed 1 at eta = 0.3 (AVX2 and AVX-512 builds): three grains bouncing in the rough
-  // floor's hollows keep the flow kinetic energy 16x above the rest threshold to the
-  // time limit, undamped as the seed's law is, while the heap itself has stopped.
+  // A few grains bouncing in the rough floor's hollows keep the flow kinetic energy above
+  // the rest threshold to the time limit, undamped as the seed's law is, while the heap
+  // itself has stopped. With no grain left out of the energy check (rest_trim 0), seed 1
+  // at eta = 0.3 does so in the SSE2, AVX2 and AVX-512 builds.
   int judged = 0;
   for (const std::uint64_t seed : {1, 2, 3, 4}) {
     ReposeConfig c = cheap(30.0, 0.3);
@@ -381,7 +382,7 @@ TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {
     c.rest_trim = 0.0;  // no grain left out of the energy check: one rattler keeps it up
     const ReposeResult r = run_repose(c);
     report(("rattlers, profile, seed " + std::to_string(seed)).c_str(), r);
-    ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+    if (!r.outcome.ok()) continue;  // a heap still creeping at the limit: not this test's premise
     if (r.energy.rows.back()[r.energy.column("ke_flow_per_grain")] <= r.rest_ke_J) {
       EXPECT_FALSE(r.rest_by_profile) << "at rest by its energy: the profile is not needed";
       continue;  // no rattlers in this packing

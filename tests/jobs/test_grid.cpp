@@ -128,8 +128,8 @@ TEST(Grid, AFrictionAngleThatLooksLikeRadiansIsNoted) {
   j["material"]["theta_deg"] = 0.5236;
   Job job = parse(j);
   ASSERT_EQ(job.notes.size(), 1u);
-  EXPECT_EQ(job.notes[0], "material.theta_deg: every value is at most 0.524, and theta is in degrees (a near frictionless "
-                          "material); if these are radians, 0.524 rad is 30 degrees");
+  EXPECT_EQ(job.notes[0], "material.theta_deg: the value 0.524 is at most pi/2, and theta is in degrees (a near "
+                          "frictionless material); if it is radians, 0.524 rad is 30 degrees");
   EXPECT_DOUBLE_EQ(job.tasks[0].params["theta_deg"].get<double>(), 0.5236) << "legal: the value is used as given";
   j["material"].erase("theta_deg");
   j["grid"] = {{"theta_deg", {0.0, 0.35, 0.7}}};
