@@ -120,13 +120,13 @@ void add_plot(CLI::App& app, int& exit_code) {
         if (a->x.empty()) a->x = d->x;
         if (a->y.empty()) a->y = split_commas(d->y);
       }
-      // A failed task's series is what it wrote before it stopped: the chart says so.
-      const bool failed = task->status != "done";
+      // A task not done (failed, or still running) wrote only part of its series: the chart says so.
+      const bool not_done = task->status != "done";
       jobs::PlotRequest r{h5, a->series, a->x, a->y, a->out,
-                          "task " + std::to_string(a->task) + ": " + a->series + (failed ? " (task " + task->status + ")" : "")};
+                          "task " + std::to_string(a->task) + ": " + a->series + (not_done ? " (task " + task->status + ")" : "")};
       jobs::plot_series(r);
       std::cout << a->out << "\n";
-      if (failed) {
+      if (not_done) {
         const std::string why = db::task_message(*task).error;
         std::cout << "note: task " << a->task << " is " << task->status
                   << (why.empty() ? std::string() : " (" + why + ")") << "; the series is what it wrote "

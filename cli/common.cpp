@@ -144,31 +144,43 @@ const CLI::Validator kPositiveFinite(
     },
     "NUMBER > 0", "positive finite number");
 
+namespace {
+// [first, end of text) read as a decimal int64 by from_chars (no base prefix, no
+// spaces, no '+'): `whole` when every character is a digit of it (or its '-').
+struct DecimalInt {
+  std::int64_t value = 0;
+  bool whole = false, in_range = false;
+};
+DecimalInt read_decimal_int(const std::string& text, std::size_t first = 0) {
+  DecimalInt d;
+  const char* begin = text.data() + first;
+  const auto [end, ec] = std::from_chars(begin, text.data() + text.size(), d.value);
+  d.whole = end == text.data() + text.size() && end != begin;
+  d.in_range = ec != std::errc::result_out_of_range;
+  return d;
+}
+}  // namespace
+
 // Whole text, no sign, within int64: CLI11 would clamp 99999999999999999999 to
 // INT64_MAX and the error would name an id the user never typed. Attached with
 // transform(), it hands CLI11 the id in plain decimal: CLI11 reads 010 as octal 8.
 const CLI::Validator kTaskId(
     [](std::string& text) {
-      std::int64_t v = 0;
-      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-      // from_chars takes no '+' and refuses empty text; v > 0 also refuses a '-'.
-      const bool ok = ec == std::errc() && end == text.data() + text.size() && v > 0;
-      if (ok) text = std::to_string(v);
+      const DecimalInt d = read_decimal_int(text);
+      // v > 0 also refuses a '-'.
+      const bool ok = d.whole && d.in_range && d.value > 0;
+      if (ok) text = std::to_string(d.value);
       return ok ? std::string() : "must be a task id (a whole number from 1 to 9223372036854775807, the first column of demcal query), got \"" + text + "\"";
     },
     "ID", "task id");
 
 const CLI::Validator kWholeNumber(
     [](std::string& text) {
-      std::int64_t v = 0;
-      // from_chars takes a '-' but no '+'; a '+' the user typed is as good as none.
-      const char* first = text.data() + (text.size() > 1 && text[0] == '+' && text[1] != '-' ? 1 : 0);
-      const auto [end, ec] = std::from_chars(first, text.data() + text.size(), v);
-      const bool whole = end == text.data() + text.size() && end != first;
-      if (whole && ec == std::errc::result_out_of_range) return "is out of range, got " + text;
-      const bool ok = ec == std::errc() && whole;
-      if (ok) text = std::to_string(v);
-      return ok ? std::string() : "must be a whole number in decimal digits, got \"" + text + "\"";
+      // A '+' the user typed is as good as none (from_chars takes only a '-').
+      const DecimalInt d = read_decimal_int(text, text.size() > 1 && text[0] == '+' && text[1] != '-' ? 1 : 0);
+      if (d.whole && !d.in_range) return "is out of range, got " + text;
+      if (d.whole) text = std::to_string(d.value);
+      return d.whole ? std::string() : "must be a whole number in decimal digits, got \"" + text + "\"";
     },
     "", "whole number");
 

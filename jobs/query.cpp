@@ -38,12 +38,16 @@ const nlohmann::json* implied_value(const std::string& scene, const std::string&
   return nullptr;
 }
 
-nlohmann::json where_value(const ResultRow& r, const std::string& key) {
-  nlohmann::json v = special(r.task, key);
-  if (!v.is_null()) return v;
+// A parameter as the task ran with it: stored, or implied by its scene; null if neither.
+nlohmann::json param_value(const ResultRow& r, const std::string& key) {
   if (r.params.contains(key)) return r.params[key];
   const nlohmann::json* implied = implied_value(r.task.scene, key);
   return implied ? *implied : nlohmann::json();
+}
+
+nlohmann::json where_value(const ResultRow& r, const std::string& key) {
+  nlohmann::json v = special(r.task, key);
+  return v.is_null() ? param_value(r, key) : v;
 }
 
 // Tables round to 6 digits for reading; CSV keeps every digit for further work.
@@ -233,8 +237,8 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   for (const auto& r : rows) {
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
     for (const auto& p : params) {
-      const nlohmann::json* implied = r.params.contains(p) ? nullptr : implied_value(r.task.scene, p);
-      line.push_back(r.params.contains(p) ? cell(r.params[p], precise) : implied ? cell(*implied, precise) : "");
+      const nlohmann::json v = param_value(r, p);
+      line.push_back(v.is_null() ? "" : cell(v, precise));
     }
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
     if (for_reading) {

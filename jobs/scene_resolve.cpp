@@ -2,6 +2,7 @@
 
 #include "job_error.hpp"
 #include "material_params.hpp"
+#include "scene_registry.hpp"
 
 #include <algorithm>
 
@@ -20,7 +21,7 @@ void resolve_diameters(nlohmann::json& p) {
   if (p.contains("grading")) {
     // A sieve chart's points are joined by straight lines in log d unless the job says d.
     if (!p.contains("size_distribution")) p["size_distribution"] = engine::to_string(engine::SizeDistribution::log_uniform_mass);
-    if (p["size_distribution"] == "uniform")
+    if (p["size_distribution"] == kImpliedUniformSizes.second)
       throw JobError("material.diameter.distribution",
                      "\"uniform\" draws by number; a grading curve gives mass, so its points are joined by "
                      "\"log_uniform_mass\" (straight in log d, the default with a curve) or \"uniform_mass\" (straight in d)");
@@ -49,7 +50,7 @@ void resolve_diameters(nlohmann::json& p) {
   }
   if (p["d_min"].get<double>() > p["d_max"].get<double>())
     throw JobError("material.diameter", "min (" + p["d_min"].dump() + ") must not exceed max (" + p["d_max"].dump() + ")");
-  erase_default(p, "size_distribution", "uniform");
+  erase_default(p, kImpliedUniformSizes.first, kImpliedUniformSizes.second);
   if (p.contains("grading"))
     if (const std::string why = material_from(p).grading().problem(); !why.empty())
       throw JobError("material.diameter.grading", why);

@@ -2,8 +2,9 @@
 
 #include "job_error.hpp"
 
+#include "engine/types.hpp"
+
 #include <algorithm>
-#include <cmath>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -148,13 +149,13 @@ void note_radian_angles(ParamSet& out) {
   if (given.empty() && out.base.contains("theta_deg")) given.push_back(out.base["theta_deg"].get<double>());
   if (given.empty()) return;
   const double largest = *std::max_element(given.begin(), given.end());
-  if (!(largest > 0.0 && largest <= std::acos(0.0))) return;
+  if (!(largest > 0.0 && largest <= engine::kPi / 2)) return;
   std::ostringstream os;
   os.precision(3);
   const bool one = given.size() == 1;
   os << where << (one ? ": the value " : ": every value is at most ") << largest << (one ? " is at most pi/2" : "")
      << ", and theta is in degrees (a near frictionless material); if " << (one ? "it is" : "these are")
-     << " radians, " << largest << " rad is " << largest * 90.0 / std::acos(0.0) << " degrees";
+     << " radians, " << largest << " rad is " << engine::rad_to_deg(largest) << " degrees";
   out.notes.push_back(os.str());
 }
 
