@@ -167,15 +167,36 @@ int serve(const MpiOptions& options) {
   }
 }
 
-RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi) {
+namespace {
+
+// A database error on rank 0 (a full disk, a lock held past the busy timeout,
+// damage) ends the farm: what this run held goes back to the queue if the database
+// takes it, and the message says what became of the work. The worker ranks are told
+// to stop as rank 0 leaves (Session); one busy with a task finishes it first, and
+// that result has nowhere to go.
+[[noreturn]] void abandon(db::Store& store, const std::string& token, const db::DbError& e) {
+  int requeued = -1;
+  try {
+    requeued = store.requeue_dead([&](const std::string& worker) { return worker != token; });
+  } catch (const std::exception&) {
+    // the database takes no writes at all: the next run re-queues them
+  }
+  if (requeued == 0) throw e;  // nothing held yet (the job was being recorded): the error as it is
+  const std::string what =
+      requeued > 0 ? std::to_string(requeued) + " task(s) this run held are back in the queue; "
+                   : "the tasks this run held are left 'running', and the next run of the job puts them back in the queue; ";
+  throw db::DbError(std::string(e.what()) + " (the run stopped: " + what +
+                        "a worker rank busy with a task finishes it and leaves, and that result is not stored; once "
+                        "the database can be written again, run the job again: finished tasks are kept)",
+                    e.bad_input());
+}
+
+RunSummary farm(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi,
+                const std::string& token) {
   std::ostream& log = options.log ? *options.log : std::cerr;
   int size = 1;
   MPI_Comm_size(MPI_COMM_WORLD, &size);
-  if (size < 2)
-    throw std::runtime_error(
-        "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
   StopSignalGuard guard;
-  const std::string token = runner_token();
   const std::filesystem::path dir = make_task_output_dir(job, options);
   const std::string spec = job.spec.dump();  // as record_job stores it
   const std::int64_t job_id = record_job(store, job, options.shard, log);
@@ -418,6 +439,22 @@ RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& opti
   // meanwhile (the hand-out above stopped then).
   s.superseded = store.job_spec(job.name) != spec;
   return s;
+}
+
+}  // namespace
+
+RunSummary run_job_root(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi) {
+  int size = 1;
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  if (size < 2)
+    throw std::runtime_error(
+        "--mpi needs at least 2 ranks: rank 0 coordinates and the others run tasks (mpirun -n 3 demcal run JOB --mpi)");
+  const std::string token = runner_token();
+  try {
+    return farm(store, job, options, mpi, token);
+  } catch (const db::DbError& e) {
+    abandon(store, token, e);
+  }
 }
 
 }  // namespace demcal::jobs::mpi

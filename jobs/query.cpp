@@ -45,6 +45,16 @@ nlohmann::json param_value(const ResultRow& r, const std::string& key) {
   return implied ? *implied : nlohmann::json();
 }
 
+// Every parameter the task ran with: the stored ones, and its scene's defaults for
+// the optional keys it left out (its key leaves them out, so one work has one key).
+nlohmann::json params_with_implied(const ResultRow& r) {
+  nlohmann::json out = r.params.is_object() ? r.params : nlohmann::json::object();
+  if (const SceneDef* def = find_scene(r.task.scene))
+    for (const auto& [k, v] : def->implied)
+      if (!out.contains(k)) out[k] = v;
+  return out;
+}
+
 nlohmann::json where_value(const ResultRow& r, const std::string& key) {
   nlohmann::json v = special(r.task, key);
   return v.is_null() ? param_value(r, key) : v;
@@ -290,7 +300,7 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
     for (const auto& name : mets) m[name] = json_number(metric_of(r, name));
     nlohmann::json o = {{"task", r.task.id},         {"job", r.task.job},     {"index", r.task.index},
                         {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
-                        {"key", r.task.key},         {"params", r.params},    {"metrics", m},
+                        {"key", r.task.key},         {"params", params_with_implied(r)}, {"metrics", m},
                         {"wall_s", json_number(r.task.wall_s)}};
     const db::TaskMessage msg = db::task_message(r.task);
     if (!msg.error.empty()) o["error"] = msg.error;
@@ -441,9 +451,11 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
                        std::any_of(all.begin(), all.end(), [&](const ResultRow& r) { return !where_value(r, w.key).is_null(); });
     if (!known && !all.empty()) {
       std::vector<std::string> keys = {"status", "scene", "task"};
-      for (const auto& r : all)
-        for (const auto& [k, v] : r.params.items())
+      for (const auto& r : all) {
+        const nlohmann::json params = params_with_implied(r);  // a temporary would die before the loop
+        for (const auto& [k, v] : params.items())
           if (std::find(keys.begin(), keys.end(), k) == keys.end()) keys.push_back(k);
+      }
       std::string guess;  // theta -> theta_deg before any near spelling (eta)
       for (const auto& k : keys)
         if (guess.empty() && k.rfind(w.key + "_", 0) == 0) guess = k;

@@ -323,6 +323,14 @@ TEST(Cli, AWhereOnAParameterAtItsDefaultMatchesTheTasksThatLeftItOut) {
   r = run_demcal({"query", "--db", "p.db", "--where", "size_distribution=uniform"}, d.path.string());
   EXPECT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("plain"), std::string::npos) << r.out;
+  // JSON gives every parameter the task ran with, the defaults it left out too; a
+  // misspelt key is matched against those as well.
+  r = run_demcal({"query", "--db", "p.db", "--format", "json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out).at(0).at("params").value("size_distribution", ""), "uniform") << r.out;
+  r = run_demcal({"query", "--db", "p.db", "--where", "size_distributon=uniform"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("(did you mean \"size_distribution\"?)"), std::string::npos) << r.err;
   // -0.0 written for eta is eta = 0: the task is reused, not run again.
   j["material"]["eta"] = 0;
   std::string text = j.dump();

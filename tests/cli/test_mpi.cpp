@@ -153,6 +153,25 @@ TEST(Mpi, ADatabaseDeletedMidRunStopsTheHandOut) {
   EXPECT_LE(started, 4) << "tasks went on being handed out after the database was gone:\n" << r.err;
 }
 
+// A database rank 0 cannot write (here its file outgrows a size limit) stops the farm
+// as it stops a local run: one error saying what became of the work, the tasks it
+// held back in the queue, and the next run finishes them.
+TEST(Mpi, ADatabaseThatCannotBeWrittenStopsTheFarmAndTheNextRunFinishes) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("full", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.11, 0.12}));
+  // The limit on the ranks only: mpirun's own shared-memory store must not hit it.
+  const pid_t limited = spawn_program({DEMCAL_MPIEXEC, "-np", "3", "--oversubscribe", "bash", "-c",
+                                       "trap '' XFSZ; ulimit -f 200; exec \"$0\" run j.json --mpi", DEMCAL_BIN},
+                                      d.path.string(), kMpiEnv);
+  const Result r = finish(limited, d.path.string());
+  EXPECT_NE(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("(the run stopped: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("run the job again: finished tasks are kept)"), std::string::npos) << r.err;
+  const Result again = mpirun(3, {}, {"run", "j.json", "--mpi"}, d.path.string());
+  EXPECT_EQ(again.rc, 0) << again.err;
+  EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "full"), "done"), 8);
+}
+
 TEST(Mpi, BadInputUnderMpirunEndsEveryRank) {
   TempDir d;
   write(d.file("bad.json"), R"({"name": "b", "scene": "collision", "material": {"theta_deg": 90}})");
