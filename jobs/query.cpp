@@ -90,6 +90,12 @@ struct Table {
   std::vector<std::string> footnotes;  // printed under a table for reading
 };
 
+// The unfiltered listing shows every task; one whose job file was edited to leave it
+// out, and that no other job shares, is listed under the job that made it.
+const char* const kNoJobHoldsIt =
+    "no job holds this task any more (its job file was edited to leave it out); the result is kept, and a job "
+    "that asks for the same work reuses it";
+
 // In a table for reading, a long message repeated on every row drowns the numbers:
 // each distinct message gets a tag ([1], [2], ...) in the row, and is printed once
 // under the table with the tasks that carry it.
@@ -97,6 +103,11 @@ void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t colu
   TextGroups groups;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const db::TaskMessage m = db::task_message(rows[i].task);
+    if (rows[i].task.index < 0 && m.error.empty() && m.warning.empty()) {
+      const std::size_t k = groups.add(kNoJobHoldsIt, rows[i].task.id);
+      t.rows[i][column] = "[" + std::to_string(k + 1) + "] note";
+      continue;
+    }
     if (m.error.empty() && m.warning.empty()) continue;
     const std::string text = m.error.empty() ? db::warning_message(m.warning) : m.error;
     const std::size_t k = groups.add(text, rows[i].task.id);
@@ -298,7 +309,8 @@ void print_json(std::ostream& out, const std::vector<ResultRow>& rows, const std
   for (const auto& r : rows) {
     nlohmann::json m = nlohmann::json::object();
     for (const auto& name : mets) m[name] = json_number(metric_of(r, name));
-    nlohmann::json o = {{"task", r.task.id},         {"job", r.task.job},     {"index", r.task.index},
+    const nlohmann::json index = r.task.index < 0 ? nlohmann::json(nullptr) : nlohmann::json(r.task.index);
+    nlohmann::json o = {{"task", r.task.id},         {"job", r.task.job},     {"index", index},
                         {"scene", r.task.scene},     {"status", r.task.status}, {"attempts", r.task.attempts},
                         {"key", r.task.key},         {"params", params_with_implied(r)}, {"metrics", m},
                         {"wall_s", json_number(r.task.wall_s)}};

@@ -252,8 +252,10 @@ void Runner::launch(const db::TaskRow& row) {
     signal(SIGTERM, SIG_DFL);
     _exit(run_worker(t));
   }
-  store_.set_pid(row.id, pid);
+  // Listed before the database hears of it: if that write fails, abandon() stops and
+  // reaps this worker with the others.
   running_.push_back(Running{row.id, t.index, pid, t.result_path, std::chrono::steady_clock::now()});
+  store_.set_pid(row.id, pid);
   progress_.set_eta(eta());
   ++counts_.running;
   progress_.line(describe_task(t.index, row.id) + " started", counts_);

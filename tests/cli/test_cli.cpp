@@ -711,6 +711,17 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
   const Result all = run_demcal({"query", "--format", "csv", "--metrics", "dt"}, d.path.string());
   EXPECT_NE(all.out.find("\n2,other,done,"), std::string::npos) << all.out;
   EXPECT_NE(all.out.find("\n1,small,done,"), std::string::npos) << all.out;
+  // Shrunk to its first task: 0.2 and 0.3 (tasks 3, 4) are held by no job. Listed
+  // under their creator, with a note, and no index in JSON.
+  write(d.file("f.json"), collision_job("small", {0.05}));
+  ASSERT_EQ(run_demcal({"run", "f.json"}, d.path.string()).rc, 0);
+  const Result table = run_demcal({"query"}, d.path.string());
+  EXPECT_NE(table.out.find("[1] tasks 3, 4: no job holds this task any more"), std::string::npos) << table.out;
+  const nlohmann::json rows = nlohmann::json::parse(run_demcal({"query", "--format", "json"}, d.path.string()).out);
+  ASSERT_EQ(rows.size(), 4u) << rows.dump();
+  EXPECT_EQ(rows[0]["index"], 0) << rows.dump();
+  EXPECT_TRUE(rows[2]["index"].is_null()) << rows.dump();
+  EXPECT_EQ(rows[2]["job"], "small") << rows.dump();
 }
 
 // The same job file after an upgrade that changed a scene's physics (every key moves):
