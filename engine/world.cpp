@@ -231,9 +231,9 @@ void World::force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc
       const double rj = R[j];
       const double rsum = ri + rj;
       if (dist2 >= rsum * rsum) {
-        if (TOUCH[e]) {
-          FS[e].setZero();
-          MR[e].setZero();
+        if (TOUCH[e]) {  // through fs and mr, as below: no second pointer walks the history
+          fs[3 * e] = fs[3 * e + 1] = fs[3 * e + 2] = 0.0;
+          mr[3 * e] = mr[3 * e + 1] = mr[3 * e + 2] = 0.0;
           TOUCH[e] = 0;
         }
         continue;
