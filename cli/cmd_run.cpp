@@ -80,8 +80,8 @@ int run(const RunArgs& a) {
   const int hidden = jobs::print_rows(std::cout, rows, {}, format);
   if (hidden > 0)
     std::cout << "(" << hidden << " more metrics per task: demcal query --db " << a.db << " --job " << job.name
-              << " --metrics all, or --format csv or json" << (shard.active() ? "; they list every shard's tasks in it" : "")
-              << ")\n";
+              << " --metrics all, or --format csv or json"
+              << (shard.active() ? "; both list the tasks of every shard in that database" : "") << ")\n";
   std::cerr << "job " << job.name << (shard.active() ? " shard " + shard.label() : std::string()) << ": " << s.done << " done (" << s.reused << " reused), " << s.failed << " failed, "
             << s.unfinished << " unfinished, of " << s.total << "\n";
   // The hint repeats what selects this run's tasks and files: without --shard it
