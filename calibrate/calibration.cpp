@@ -287,6 +287,16 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     " no value at a corner (" + g +
                                     "): the surrogate bridges the gap there; rerun or replace those tasks");
   }
+  // A point that lost a replica averages the others: with replicas that differ
+  // systematically (another packing) its mean moves by their spread, and nothing in
+  // the numbers shows it. Once a job: its metrics share the tasks.
+  std::set<std::string> told;
+  for (const auto& rs : cal.surfaces)
+    if (rs.partials() > 0 && told.insert(rs.job).second)
+      cal.result.warnings.push_back(std::to_string(rs.partials()) + " grid point(s) of job " + rs.job +
+                                    " have a value from fewer replicas than they have tasks (" + rs.partial_list() +
+                                    "): their means rest on the replicas that finished, and may be biased; demcal "
+                                    "status shows why tasks failed, demcal run finishes unfinished ones");
   // The surrogates stand on these results: say when they carry warnings, once a job.
   std::map<std::string, const ResponseSurface*> warned;
   for (const auto& rs : cal.surfaces)
@@ -333,7 +343,8 @@ FitRecord fit_record(const FitRequest& req, const Calibration& cal, int round, c
     const auto& s = cal.models[k].surrogate;
     surrogates.push_back({{"metric", cal.models[k].metric}, {"job", cal.models[k].job}, {"kind", kind_name(s.kind())},
                           {"smoothing", s.lambda()}, {"loo_rms", s.loo_rms()}, {"loo_max", s.loo_max()},
-                          {"points", s.points()}, {"holes", cal.surfaces[k].holes()}});
+                          {"points", s.points()}, {"holes", cal.surfaces[k].holes()},
+                          {"partial", cal.surfaces[k].partials()}});
   }
   r["jobs"] = std::vector<std::string>(js.begin(), js.end());
   r["surrogates"] = surrogates;

@@ -1,5 +1,6 @@
 #include "map.hpp"
 
+#include "jobs/decimal.hpp"
 #include "jobs/private_temp_dir.hpp"
 
 #include "jobs/job_error.hpp"
@@ -162,6 +163,9 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
       if (!p.hole()) (p.refine ? ref : pts) << num(p.theta) << " " << num(p.eta) << "\n";
     for (const auto& p : rs.points)
       if (p.spiked > 0) spk << num(p.theta) << " " << num(p.eta) << "\n";
+    std::ofstream part(path("partial.dat"));
+    for (const auto& p : rs.points)
+      if (p.partial()) part << num(p.theta) << " " << num(p.eta) << "\n";
     for (const auto& h : holes) hol << num(h.first) << " " << num(h.second) << "\n";
     if (holes.empty()) hol << "NaN NaN\n";
     if (r.overlay) {
@@ -225,8 +229,10 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   std::ofstream g(path("map.gp"));
   // Two lines: on one, a long metric label and surrogate ran past the 900-pixel width.
   // A string, not a fixed buffer: a long job name cut mid-character made the SVG invalid.
-  const std::string title = rs.label + ", job " + rs.job + ": " + std::to_string(rs.with_data()) +
-                            " points with data, " + std::to_string(rs.holes()) + " holes";
+  const std::string title = rs.label + ", job " + rs.job + (r.pins.empty() ? "" : " (" + r.pins + ")") + ": " +
+                            std::to_string(rs.with_data()) + " points with data, " + std::to_string(rs.holes()) +
+                            " holes" +
+                            (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : "");
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
     << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe()) : quoted(r.title))
     << " noenhanced font ',10' offset 0,0.6\n"
@@ -263,6 +269,10 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   if (fs::file_size(path("spiked.dat")) > 0)
     g << ", \\\n  " << quoted(path("spiked.dat"))
       << " using 1:2:(0) with points pt 8 ps 2.2 lw 2 lc rgb '#d06000' title 'phi_peak on a spike (in a replica)' noenhanced";
+  // A square round the grid point: its value is the mean of fewer replicas than it has tasks.
+  if (fs::file_size(path("partial.dat")) > 0)
+    g << ", \\\n  " << quoted(path("partial.dat"))
+      << " using 1:2:(0) with points pt 4 ps 2.2 lw 2 lc rgb '#b00000' title 'short of replicas (failed or missing)'";
   if (fs::file_size(path("refine.dat")) > 0)
     g << ", \\\n  " << quoted(path("refine.dat")) << " using 1:2:(0) with points pt 6 ps 1.2 lw 2 lc rgb 'black' title 'refinement runs'";
   if (r.overlay)
@@ -275,10 +285,36 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   image.commit();
 }
 
-std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric) {
+namespace {
+
+// Whether a stored fit's --where pins (key -> text) are the map's: the same keys, the
+// same values (numbers compared as numbers, "100" and "100.0" alike).
+bool same_pins(const nlohmann::json& stored, const std::vector<jobs::Where>& where) {
+  if (!stored.is_object()) return where.empty();
+  std::map<std::string, std::string> want;
+  for (const auto& w : where) want[w.key] = w.value;
+  if (stored.size() != want.size()) return false;
+  for (const auto& [k, v] : want) {
+    if (!stored.contains(k) || !stored[k].is_string()) return false;
+    const std::string& text = stored[k].get_ref<const std::string&>();
+    double a = 0, b = 0;
+    const bool numbers = jobs::parse_decimal(text, a) && jobs::parse_decimal(v, b);
+    if (numbers ? a != b : text != v) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric,
+                                             const std::vector<jobs::Where>& where, int* on_other_pins) {
+  if (on_other_pins) *on_other_pins = 0;
   const MetricSpec wanted = metric_spec(metric);
-  const auto rows = store.fits();
-  std::optional<MapOverlay> latest;  // of the job, whatever its targets
+  auto rows = store.fits();
+  std::stable_sort(rows.begin(), rows.end(), [](const db::FitRow& a, const db::FitRow& b) {
+    return a.created_at != b.created_at ? a.created_at < b.created_at : a.id < b.id;
+  });
+  std::optional<MapOverlay> latest;  // of the job on the map's pins, whatever its targets
   for (auto it = rows.rbegin(); it != rows.rend(); ++it) {
     const auto j = nlohmann::json::parse(it->result_json, nullptr, false);
     if (j.is_discarded() || j.value("status", "") != "ok" || !j.contains("jobs") || !j["jobs"].is_array()) continue;
@@ -286,6 +322,10 @@ std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string
     for (const auto& name : j["jobs"])
       if (name.is_string() && name.get<std::string>() == job) uses = true;
     if (!uses) continue;
+    if (!same_pins(j.contains("where") ? j["where"] : nlohmann::json::object(), where)) {
+      if (on_other_pins) ++*on_other_pins;
+      continue;
+    }
     try {
       MapOverlay o;
       o.fit_id = it->id;

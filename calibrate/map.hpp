@@ -8,10 +8,12 @@
 #include "surrogate.hpp"
 
 #include "db/store.hpp"
+#include "jobs/query.hpp"
 
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace demcal::calibrate {
 
@@ -25,7 +27,8 @@ struct MapOverlay {
 
 struct MapRequest {
   std::string out;     // .png or .svg
-  std::string title;   // default: metric, job, points, holes, surrogate
+  std::string title;   // default: metric, job and pins, points, holes, surrogate
+  std::string pins;    // the --where filters, "confining_kpa=200, packing=loose": in the default title
   int fine = 121;      // samples per axis of the drawn surface
   const MapOverlay* overlay = nullptr;
 };
@@ -33,8 +36,12 @@ struct MapRequest {
 // Throws JobError("--out") for a wrong extension, std::runtime_error when gnuplot fails.
 void draw_map(const ResponseSurface& rs, const Surrogate& surrogate, const MapRequest& request);
 
-// The most recent successful fit stored for `job` that had a target on `metric` (as
-// metric_spec reads it), else the most recent one of the job; nothing if it has none.
-std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric);
+// The most recent successful fit stored for `job` on the same --where pins as the map
+// (a fit of another pressure or packing is another surface) that had a target on
+// `metric` (as metric_spec reads it), else the most recent such fit of the job;
+// nothing if it has none. Most recent: by the time it was made (a merge copies older
+// fits in), then by id. `on_other_pins` counts the job's fits left out for their pins.
+std::optional<MapOverlay> latest_fit_overlay(db::Store& store, const std::string& job, const std::string& metric,
+                                             const std::vector<jobs::Where>& where, int* on_other_pins = nullptr);
 
 }  // namespace demcal::calibrate

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <set>
 
@@ -61,6 +62,41 @@ int ResponseSurface::holes() const {
   int n = 0;
   for (const auto& p : points) n += p.hole() && !p.refine;
   return n;
+}
+
+std::string GridPoint::without_value() const {
+  if (absent) return "not in this database";
+  std::string s;
+  const auto add = [&](int n, const char* what) {
+    if (n > 0) s += (s.empty() ? "" : ", ") + std::to_string(n) + " " + what;
+  };
+  add(failed, "failed");
+  add(unfinished, "not finished");
+  add(missing, "without the metric");
+  return s;
+}
+
+int ResponseSurface::partials() const {
+  int n = 0;
+  for (const auto& p : points) n += p.partial();
+  return n;
+}
+
+std::string ResponseSurface::partial_list(std::size_t max) const {
+  std::string s;
+  std::size_t shown = 0, total = 0;
+  for (const auto& p : points) {
+    if (!p.partial()) continue;
+    if (shown++ < max) {
+      char head[96];
+      std::snprintf(head, sizeof head, "theta %g, eta %g: %d of %d", p.theta, p.eta, p.n(),
+                    p.n() + p.failed + p.unfinished + p.missing);
+      s += (s.empty() ? "" : "; ") + std::string(head) + " (" + p.without_value() + ")";
+    }
+    ++total;
+  }
+  if (total > max) s += "; and " + std::to_string(total - max) + " more";
+  return s;
 }
 
 int ResponseSurface::with_data() const {
@@ -178,10 +214,14 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     throw JobError(opt.where.empty() ? "--job" : "--where",
                    "no data: job \"" + job + "\" has no tasks" + (opt.where.empty() ? "" : " matching the filters"));
 
-  // A stored metric nobody has is an unknown metric, not missing data.
+  // A stored metric nobody has is an unknown metric, not missing data. Nobody: no task
+  // of the job, filtered or not (the filters may select only tasks that lack it).
   std::set<std::string> stored;
   for (const auto& row : rows)
     for (const auto& m : row.r.metrics) stored.insert(m.first);
+  if (!opt.where.empty() && !stored.count(metric))
+    for (const auto& r : jobs::select_rows(store, job, {}))
+      for (const auto& m : r.metrics) stored.insert(m.first);
   if (!is_alias(metric) && !stored.count(metric)) {
     std::string known = join(metric_aliases());
     throw JobError(opt.field, "unknown metric \"" + metric + "\" (expected " + known +
@@ -205,7 +245,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     // Finished tasks without the metric: the metric is not this job's (a repose angle
     // asked of a triaxial job). None finished: the job has nothing yet.
     throw JobError(done > 0 ? opt.field : "--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
-                                " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
+                                (opt.where.empty() ? "" : " selected") + " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
                                 " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
                                 std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
   }
@@ -279,6 +319,17 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
       ++p.unfinished;
     }
   }
+  // Nodes of the grid no task of this database stands on (the grid is the product of
+  // its axes): holes, as the map draws them, not points silently left out.
+  for (double th : thetas)
+    for (double et : etas)
+      if (!index.count(std::make_pair(std::llround(th * 1e9), std::llround(et * 1e9)))) {
+        GridPoint p;
+        p.theta = th;
+        p.eta = et;
+        p.absent = true;
+        rs.points.push_back(p);
+      }
   // Grid points first, then refinement points.
   std::stable_partition(rs.points.begin(), rs.points.end(), [](const GridPoint& p) { return !p.refine; });
   rs.thetas.assign(thetas.begin(), thetas.end());

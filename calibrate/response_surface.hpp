@@ -22,10 +22,17 @@ struct GridPoint {
   std::vector<std::int64_t> tasks;  // the task each value came from (empty for synthetic surfaces)
   double mean = kNaN, sd = kNaN, se = kNaN;  // sd, se: NaN with fewer than 2 replicas
   int failed = 0, unfinished = 0, missing = 0;  // tasks without a value, by reason
+  // A node of the job's (theta, eta) grid with no task in this database at all (a
+  // shard not merged yet, a part not run): a hole as much as a failed task.
+  bool absent = false;
   int spiked = 0;              // values whose phi_peak rests on a spike (metrics built on phi_peak_deg)
   bool refine = false;         // added by `demcal fit --refine`, not part of the job's grid
   int n() const { return static_cast<int>(values.size()); }
   bool hole() const { return values.empty(); }
+  // A point with a value whose other replicas have none: its mean rests on fewer.
+  bool partial() const { return !hole() && failed + unfinished + missing > 0; }
+  // Why tasks of the point have no value: "1 failed, 2 not finished", "not in this database".
+  std::string without_value() const;
 };
 
 struct Box {
@@ -53,6 +60,9 @@ struct ResponseSurface {
   std::vector<double> data_etas() const;
   int holes() const;
   int with_data() const;
+  int partials() const;  // grid points with a value that lack some replicas' (GridPoint::partial)
+  // The partial points, "theta 40, eta 0: 1 of 2 (1 failed)", up to `max`, then how many more.
+  std::string partial_list(std::size_t max = 4) const;
   // Standard error of a mean of a typical point: pooled_sd / sqrt(mean replica count);
   // 0 when no point has replicas (then the spread is unknown, and only the
   // surrogate's leave-one-out error measures the noise).

@@ -53,19 +53,27 @@ void add_map(CLI::App& app, int& exit_code) {
         throw jobs::JobError("--job", "job \"" + job + "\", " + a->metric + ": " + e.what());
       }
       std::optional<calibrate::MapOverlay> overlay;
-      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job, a->metric);
+      int other_pins = 0;
+      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job, a->metric, where, &other_pins);
+      std::string pins;
+      for (const auto& w : where) pins += (pins.empty() ? "" : ", ") + w.key + "=" + w.value;
       calibrate::MapRequest mr;
       mr.out = out;
       mr.title = a->title;
+      mr.pins = pins;
       mr.overlay = overlay ? &*overlay : nullptr;
       calibrate::draw_map(rs, s, mr);
-      std::cout << "wrote " << out << ": " << rs.label << " of job " << job << ", " << rs.with_data() << " point(s) with data, "
-                << rs.holes() << " hole(s)\n"
+      std::cout << "wrote " << out << ": " << rs.label << " of job " << job << (pins.empty() ? "" : " (" + pins + ")")
+                << ", " << rs.with_data() << " point(s) with data, " << rs.holes() << " hole(s)"
+                << (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : std::string()) << "\n"
                 << "surrogate: " << s.describe() << "\n";
       for (const auto& p : rs.points)
         if (p.hole() && !p.refine)
-          std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.failed << " failed, " << p.unfinished
-                    << " not finished, " << p.missing << " without the metric)\n";
+          std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.without_value() << ")\n";
+      for (const auto& p : rs.points)
+        if (p.partial())
+          std::cout << "short of replicas: theta = " << p.theta << ", eta = " << p.eta << " (the mean of " << p.n()
+                    << "; " << p.without_value() << ")\n";
       for (const auto& p : rs.points)
         if (p.spiked > 0)
           std::cout << "peak on a spike: theta = " << p.theta << ", eta = " << p.eta << " (" << p.spiked << " of "
@@ -73,6 +81,9 @@ void add_map(CLI::App& app, int& exit_code) {
       if (rs.on_spike > 0)
         std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
                   << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
+      if (!overlay && other_pins > 0)
+        std::cout << "no fit drawn: job " << job << "'s " << other_pins << " fit(s) were made on other --where pins "
+                  << "than this map's (" << (pins.empty() ? std::string("none") : pins) << "), another surface\n";
       if (overlay)
         std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
                   << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";

@@ -40,20 +40,29 @@ std::vector<std::string> split_commas(const std::string& s) {
   return out;
 }
 
-// The database and its demcal-out/ moved together (a cluster's results copied to a
-// laptop): the stored path, absolute, names the old place. The same file under the
-// database's own demcal-out/ is taken; the task key check below keeps it honest.
+// The database and its results moved together (a cluster's results copied to a
+// laptop, a merged database with its parts/ folder): the stored path, absolute, names
+// the old place. The folder the database is in is searched for the stored path's
+// tail, the longest first: demcal-out/JOB/FILE beside it, parts/demcal-out/... of a
+// merge. The task key check below keeps it honest.
 std::string moved_with_the_database(const std::string& h5, const std::string& db) {
   namespace fs = std::filesystem;
   if (fs::exists(h5)) return h5;
-  const std::string mark = "/demcal-out/";
-  const auto at = h5.rfind(mark);
-  if (at == std::string::npos) return h5;
-  const fs::path here = fs::path(default_out_dir(db)) / h5.substr(at + mark.size());
-  if (!fs::exists(here)) return h5;
-  std::cerr << "note: the task's HDF5 file is not at " << h5 << " any more; reading " << here.string()
-            << " (demcal-out/ next to the database)\n";
-  return here.string();
+  std::error_code ec;
+  const fs::path stored(h5), dir = fs::weakly_canonical(fs::absolute(db), ec).parent_path();
+  std::vector<fs::path> parts(stored.begin(), stored.end());
+  for (std::size_t from = 1; from < parts.size(); ++from) {
+    fs::path tail;
+    for (std::size_t k = from; k < parts.size(); ++k) tail /= parts[k];
+    const fs::path here = dir / tail;
+    if (!fs::is_regular_file(here, ec)) continue;
+    std::cerr << "note: the task's HDF5 file is not at " << h5 << " any more; reading " << here.string()
+              << " (the same path's tail, in the database's folder)\n";
+    return here.string();
+  }
+  std::cerr << "note: the task's HDF5 file is not at " << h5 << ", nor under " << dir.string()
+            << " (the database's folder) at any tail of that path\n";
+  return h5;
 }
 }  // namespace
 

@@ -4,7 +4,7 @@
 #include "calibrate/map.hpp"
 #include "synthetic.hpp"
 
-#include "../cli/cli_util.hpp"
+#include "../cli/dist_util.hpp"
 
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
@@ -60,6 +60,123 @@ TEST(CalibrateStore, GatherAveragesReplicasAndKeepsHoles) {
   EXPECT_THROW(calibrate::gather(s, "grid", "nonsense"), jobs::JobError);
   EXPECT_THROW(calibrate::gather(s, "nojob", "phi_peak"), jobs::JobError);
   EXPECT_THROW(calibrate::gather(s, "grid", "repose"), jobs::JobError);  // no data
+}
+
+// The task ids of a fake job's grid point, replica by replica.
+std::vector<std::int64_t> point_tasks(const std::string& db, double th, double et) {
+  db::Store s(db, true);
+  std::vector<std::int64_t> ids;
+  for (const auto& t : s.tasks("grid")) {
+    const auto p = nlohmann::json::parse(t.params_json);
+    if (p["theta_deg"] == th && p["eta"] == et) ids.push_back(t.id);
+  }
+  return ids;
+}
+
+// A point that lost one of its two replicas keeps a value, the other replica's: it is
+// counted and named (fit, map), not passed off as a whole point. A grid node with no
+// task in the database (a shard not merged) is a hole, as the map draws it.
+TEST(CalibrateStore, APointShortOfReplicasAndANodeWithoutTasksAreSaid) {
+  TempDir d;
+  const std::string db = make_db(d, /*with_holes=*/false);
+  const auto lost = point_tasks(db, 40, 0.0), absent = point_tasks(db, 25, 0.2);
+  ASSERT_EQ(lost.size(), 2u);
+  ASSERT_EQ(absent.size(), 2u);
+  sql(db, "UPDATE tasks SET status = 'failed' WHERE id = " + std::to_string(lost[1]) +
+              "; DELETE FROM metrics WHERE task_id = " + std::to_string(lost[1]) +
+              "; DELETE FROM job_tasks WHERE task_id IN (" + std::to_string(absent[0]) + ", " + std::to_string(absent[1]) + ")");
+  {
+    db::Store s(db, true);
+    const auto rs = calibrate::gather(s, "grid", "phi_peak");
+    EXPECT_EQ(rs.holes(), 1);
+    EXPECT_EQ(rs.partials(), 1);
+    EXPECT_EQ(rs.partial_list(), "theta 40, eta 0: 1 of 2 (1 failed)");
+    for (const auto& p : rs.points)
+      if (p.hole()) EXPECT_EQ(p.without_value(), "not in this database") << p.theta << " " << p.eta;
+  }
+  const double th = 28, et = 0.22;
+  Result r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
+                         "phi_cv=" + std::to_string(phi_cv_fn(th, et))},
+                        d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("1 hole(s), 1 point(s) short of replicas"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("warning: 1 grid point(s) of job grid have a value from fewer replicas than they have tasks "
+                       "(theta 40, eta 0: 1 of 2 (1 failed))"),
+            std::string::npos)
+      << r.out;
+  r = run_demcal({"map", "--metric", "phi_cv", "--out", "m.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("1 hole(s), 1 short of replicas"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("hole: theta = 25, eta = 0.2 (not in this database)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("short of replicas: theta = 40, eta = 0 (the mean of 1; 1 failed)"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("m.svg")).find("short of replicas (failed or missing)"), std::string::npos);
+  // A metric the tasks a filter selects do not store is no data there, not unknown.
+  std::string seed8;
+  for (const auto& t : db::Store(db, true).tasks("grid"))
+    if (nlohmann::json::parse(t.params_json)["seed"] == 8) seed8 += (seed8.empty() ? "" : ", ") + std::to_string(t.id);
+  sql(db, "DELETE FROM metrics WHERE name = 'phi_cv_deg' AND task_id IN (" + seed8 + ")");
+  r = run_demcal({"map", "--metric", "phi_cv", "--where", "seed=8", "--out", "s.svg"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--metric: no data: none of job \"grid\"'s 35 selected tasks has a stored phi_cv_deg"),
+            std::string::npos)
+      << r.err;
+}
+
+// A map of one pressure draws the fit made on that pressure, never another's: a fit
+// is drawn only on the --where pins it was made on, the newest by when it was made.
+TEST(CalibrateCli, AMapDrawsOnlyAFitMadeOnItsPins) {
+  TempDir d;
+  const std::string db = d.file("demcal.db");
+  {
+    db::Store s(db);
+    std::vector<db::NewTask> tasks;
+    for (double p : {100.0, 200.0})
+      for (double th : kTh)
+        for (double et : kEt) {
+          const nlohmann::json q = {{"theta_deg", th}, {"eta", et}, {"seed", 1}, {"confining_kpa", p}};
+          tasks.push_back({"g:" + q.dump(), "triaxial", q.dump()});
+        }
+    s.put_job("g", R"({"name": "g"})", tasks);
+    for (const auto& t : s.tasks("g")) {
+      const auto q = nlohmann::json::parse(t.params_json);
+      const double th = q["theta_deg"], et = q["eta"], shift = q["confining_kpa"] == 200.0 ? 1.0 : 0.0;
+      s.claim(t.id, "test");
+      db::Outcome o;
+      o.status = "done";
+      o.metrics = {{"phi_peak_deg", phi_peak_fn(th, et) + shift}, {"phi_cv_deg", phi_cv_fn(th, et) + shift}};
+      s.finish(t.id, "test", o);
+    }
+  }
+  const std::vector<std::string> targets = {"--target", "phi_peak=" + std::to_string(phi_peak_fn(28, 0.22)), "--target",
+                                            "phi_cv=" + std::to_string(phi_cv_fn(28, 0.22))};
+  auto fit = [&](const std::string& pin) {
+    std::vector<std::string> args = {"fit", "--where", pin};
+    args.insert(args.end(), targets.begin(), targets.end());
+    const Result r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 0) << r.err;
+  };
+  fit("confining_kpa=200");  // fit 1
+  fit("confining_kpa=100");  // fit 2
+  Result r = run_demcal({"map", "--metric", "phi_peak", "--where", "confining_kpa=200.0", "--out", "a.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("of job g (confining_kpa=200.0), 36 point(s)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("drawn: 95% region and best point of fit 1 "), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("a.svg")).find("job g (confining_kpa=200.0): 36 points with data"), std::string::npos);
+  r = run_demcal({"map", "--metric", "phi_peak", "--where", "confining_kpa=100", "--out", "b.svg"}, d.path.string());
+  EXPECT_NE(r.out.find("drawn: 95% region and best point of fit 2 "), std::string::npos) << r.out;
+  // A newer fit by its time (a merge copies an older one in under a higher id).
+  fit("confining_kpa=200");  // fit 3
+  sql(db, "UPDATE fits SET created_at = created_at + 1000 WHERE id = 1");
+  r = run_demcal({"map", "--metric", "phi_peak", "--where", "confining_kpa=200", "--out", "c.svg"}, d.path.string());
+  EXPECT_NE(r.out.find("drawn: 95% region and best point of fit 1 "), std::string::npos) << r.out;
+  sql(db, "DELETE FROM fits WHERE id = 2");
+  r = run_demcal({"map", "--metric", "phi_peak", "--where", "confining_kpa=100", "--out", "e.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(r.out.find("drawn: 95%"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("no fit drawn: job g's 2 fit(s) were made on other --where pins than this map's "
+                       "(confining_kpa=100), another surface"),
+            std::string::npos)
+      << r.out;
 }
 
 TEST(CalibrateMap, WritesPngAndSvgWithHoles) {

@@ -627,6 +627,19 @@ TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_EQ(r.out.find("note:"), std::string::npos) << r.out;
   EXPECT_EQ(slurp(d.file("ok.svg")).find("(task"), std::string::npos);
+  // Results in a folder of their own under the database's (a merge's parts/), moved
+  // with it: found by the tail of the stored path.
+  fs::create_directories(d.path / "c");
+  write(d.file("c/j.json"), collision_job("deep", {0.1}));
+  ASSERT_EQ(run_demcal({"run", "j.json", "--db", "m.db", "--out", "parts/out"}, d.file("c")).rc, 0);
+  fs::rename(d.path / "c", d.path / "e");
+  r = run_demcal({"plot", "1", "--db", "e/m.db", "--series", "energy", "--out", "deep.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("reading " + fs::canonical(d.path / "e").string() + "/parts/out/deep/"), std::string::npos) << r.err;
+  fs::remove_all(d.path / "e" / "parts");
+  r = run_demcal({"plot", "1", "--db", "e/m.db", "--series", "energy", "--out", "gone.svg"}, d.path.string());
+  EXPECT_EQ(r.rc, 1);
+  EXPECT_NE(r.err.find("nor under " + fs::canonical(d.path / "e").string()), std::string::npos) << r.err;
 }
 
 // 50 frictionless grains (the quickstart's grid, over theta and eta, is replaced) in a
