@@ -47,6 +47,11 @@ void double_attr(H5::H5Object& obj, const std::string& name, double value) {
   a.write(H5::PredType::NATIVE_DOUBLE, &value);
 }
 
+void int_attr(H5::H5Object& obj, const std::string& name, std::int64_t value) {
+  H5::Attribute a = obj.createAttribute(name, H5::PredType::NATIVE_INT64, H5::DataSpace(H5S_SCALAR));
+  a.write(H5::PredType::NATIVE_INT64, &value);
+}
+
 std::string read_string_attr(const H5::H5Object& obj, const std::string& name) {
   H5::Attribute a = obj.openAttribute(name);
   std::string out;
@@ -71,6 +76,7 @@ void write_series(H5::Group& root, const engine::Series& s) {
 void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
   H5::Group g = f.createGroup(snapshot_group(step));
   double_attr(g, "TimeValue", s.time);
+  string_attr(g, "TimeValue_units", "s");  // H5Part's TimeValue is a bare number
   string_attr(g, "label", s.label.empty() ? "snapshot" : s.label);
   struct Column {
     const char* name;
@@ -146,8 +152,8 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
     string_attr(f, "task_key", info.task_key);
     string_attr(f, "status", info.status);
     if (!info.message.empty()) string_attr(f, "message", info.message);
-    double_attr(f, "task_id", static_cast<double>(info.task_id));
-    double_attr(f, "physics_version", physics_version(info.scene));
+    int_attr(f, "task_id", info.task_id);
+    int_attr(f, "physics_version", static_cast<std::int64_t>(physics_version(info.scene)));
     H5::Group root = f.createGroup("series");
     for (const auto& s : series) write_series(root, s);
     for (std::size_t i = 0; i < snapshots.size(); ++i) write_snapshot(f, i, snapshots[i]);

@@ -417,7 +417,11 @@ TEST(Cli, SnapshotsAreWrittenInTheH5PartLayoutOnlyWhenAsked) {
     return v;
   };
   EXPECT_EQ(text(f, "scene"), "collision");
-  EXPECT_TRUE(f.attrExists("physics_version"));
+  EXPECT_EQ(f.openAttribute("physics_version").getTypeClass(), H5T_INTEGER);
+  std::int64_t id = 0;
+  f.openAttribute("task_id").read(H5::PredType::NATIVE_INT64, &id);
+  EXPECT_EQ(id, snap[0].id);
+  EXPECT_EQ(text(f.openGroup("Step#1"), "TimeValue_units"), "s");
   EXPECT_EQ(text(f.openDataSet("series/energy/time"), "units"), "s");
   EXPECT_EQ(text(f.openDataSet("series/energy/kinetic"), "units"), "J");
   EXPECT_EQ(text(f.openDataSet("Step#0/vx"), "units"), "m/s");

@@ -221,7 +221,12 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
   const std::string log = slurp(d.file("sbatch.log"));
   const std::string self = fs::canonical(d.file("job.slurm.sh")).string();
   EXPECT_NE(log.find("--parsable --array=1-3 " + self + " shard"), std::string::npos) << log;
-  EXPECT_NE(log.find("--dependency=afterok:4001 --cpus-per-task=1 " + self + " merge"), std::string::npos) << log;
+  // The merge's log by job id, not %a (no array element there).
+  const std::string parts_dir = fs::weakly_canonical(d.path / "parts").string();
+  EXPECT_NE(log.find("--dependency=afterok:4001 --cpus-per-task=1 --output=" + parts_dir + "/slurm-%x-merge-%j.out " + self +
+                     " merge"),
+            std::string::npos)
+      << log;
   EXPECT_NE(r.out.find("job 4001 (array 1-3)"), std::string::npos) << r.out;
 
   // What SLURM would run: each array element, then the merge.
