@@ -550,15 +550,19 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     } else {
       best->recommended = true;
       k.recommended = best->value;
+      // One replica a setting measures no spread: its sd reads 0, and the error alone
+      // (one packing's) is judged. Said, not shown as "+/- 0".
+      const bool spread = s.replicas > 1;
       rec << "recommended " << best->label << " (";
       for (std::size_t m = 0; m < nm; ++m)
-        rec << (m ? ", " : "") << short_metric(d.metrics[m]) << " error " << fmt(best->error[m], 2) << " +/- "
-            << fmt(best->sd[m], 2) << " deg";
+        rec << (m ? ", " : "") << short_metric(d.metrics[m]) << " error " << fmt(best->error[m], 2)
+            << (spread ? " +/- " + fmt(best->sd[m], 2) : std::string()) << " deg";
       rec << "; " << std::llround(best->work / 1e6) << " million particle-steps, " << fmt(best->wall_s, 4)
           << " s, against " << std::llround(ref->work / 1e6) << " million and " << fmt(ref->wall_s, 4)
           << " s for the reference " << ref_label
-          << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance)
-          << " deg including the replica spread";
+          << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance) << " deg"
+          << (spread ? " including the replica spread"
+                     : " of one replica, whose spread is not measured: more replicas (--replicas 3) may not confirm it");
     }
     std::string spiked;
     for (const auto& p : k.points)
@@ -567,14 +571,16 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
                   std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
     if (!spiked.empty())
       rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
-          << (o.smoothed_peak ? " (judged here by the running mean's peak, " + running_mean_vs_spike() + ")" : "");
+          << (o.smoothed_peak ? " (judged here by the running mean's peak, " + running_mean_vs_spike() + ")"
+                              : " (--peak smoothed judges the running mean's peak instead)");
     k.recommendation = rec.str();
     s.knobs.push_back(std::move(k));
   }
 
   std::ostringstream summary;
   summary << "recommended settings (" << s.name << (o.smoothed_peak ? ", phi_peak by its running mean" : "")
-          << ", one knob at a time around the baseline, tolerance " << fmt(s.tolerance) << " deg):";
+          << ", one knob at a time around the baseline, tolerance " << fmt(s.tolerance) << " deg"
+          << (s.replicas > 1 ? "" : ", one replica a setting: the spread not measured") << "):";
   bool any = false;
   for (const auto& k : s.knobs) {
     summary << (any ? ", " : " ") << k.name << " " << (std::isfinite(k.recommended) ? label_of(k.recommended) : "none");

@@ -168,17 +168,27 @@ int study(const StudyArgs& a) {
   if (const int kept = s.tasks - s.reused - s.ran; kept > 0) std::cout << ", " << kept << " failed in an earlier run";
   std::cout << ")\n";
   std::cout << "series           dt_factor  status    drift/sim-s (worst)  mean +- sd of replicas   wall-s/sim-s  pareto\n";
+  bool past_shown = false;
   for (const auto& p : s.points) {
     char line[240];
+    // A run past its law's critical step that did not blow up within the run is no
+    // stable step: friction's dissipation can hide the growth for a while.
+    const double critical = p.friction ? s.critical_factor_full : s.critical_factor_frictionless;
+    const bool past = critical > 0.0 && p.dt_factor > critical * (1.0 + 1e-9);
+    past_shown = past_shown || (p.ok && past);
     if (p.ok)
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19.3e  %10.2e +- %8.2e  %12.3e  %s\n",
-                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, "ok", p.drift, p.drift_mean,
-                    p.drift_sd, p.cost, p.pareto ? "*" : "");
+                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, past ? "ran*" : "ok", p.drift,
+                    p.drift_mean, p.drift_sd, p.cost, p.pareto ? "*" : "");
     else  // an unstable run has no drift or cost to show
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19s  %22s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
                     p.dt_factor, "unstable", "-", "-", "-");
     std::cout << line;
   }
+  if (past_shown)
+    std::cout << "ran*: past its law's critical step (frictionless " << s.critical_factor_frictionless << ", "
+              << s.critical_mode_full << " " << s.critical_factor_full
+              << "), and no instability showed within the run: not a stable step\n";
   std::cout << s.recommendation << "\n";
   for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
   return kOk;

@@ -1,4 +1,5 @@
 #include "timestep.hpp"
+#include "format.hpp"
 
 #include "errors.hpp"
 #include "world.hpp"
@@ -64,12 +65,6 @@ void wall_limits(std::vector<ModeLimit>& modes, const ContactParams& law, Body a
   inplane_modes(modes, name, M, Eigen::Vector2d(1.0, a.r), law.ks, Eigen::Vector2d(0.0, 1.0), kr);
 }
 
-std::string fmt(double v) {
-  std::ostringstream os;
-  os.precision(4);
-  os << v;
-  return os.str();
-}
 
 }  // namespace
 

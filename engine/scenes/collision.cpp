@@ -1,4 +1,5 @@
 #include "collision.hpp"
+#include "../format.hpp"
 
 #include "../errors.hpp"
 #include "../measure.hpp"
@@ -75,6 +76,25 @@ Metrics CollisionResult::metrics() const {
           {"drift_per_simulated_s", drift_per_simulated_second},
           {"wall_s_per_simulated_s", simulated_seconds > 0 ? wall_seconds / simulated_seconds : 0.0}};
 }
+
+namespace {
+
+// With the energy check off (allow_unstable_dt, or energy_guard < 0: a stability
+// study) a run past the critical step ends "done" whatever its energy did: say how
+// much energy it created, which nothing in an elastic, frictionless collision can.
+void warn_unchecked_growth(const CollisionConfig& cfg, CollisionResult& res) {
+  if (!res.outcome.ok() || cfg.energy_guard >= 0.0 || !(res.energy_initial > 0.0)) return;
+  const double growth = res.energy_final / res.energy_initial - 1.0;
+  const double limit = CollisionConfig{}.energy_guard;
+  if (!(growth > limit)) return;
+  res.outcome.warnings.push_back("total energy grew by " + fmt(100.0 * growth, 3) + "% over the run with no source of "
+                                 "energy (the " + fmt(100.0 * limit) + "% check of collision.energy_guard was off): the "
+                                 "integration created it at dt = " + fmt(res.dt / res.dt_critical, 3) +
+                                 " x the critical step (" + res.critical_mode + ")");
+  res.outcome.message = res.outcome.warnings.back();
+}
+
+}  // namespace
 
 CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   cfg.validate();
@@ -165,6 +185,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;
   res.drift_per_simulated_second = res.drift_per_million_steps / (1e6 * opt.dt);
   if (!res.outcome.ok()) res.drift_per_million_steps = res.drift_per_simulated_second = INFINITY;
+  warn_unchecked_growth(cfg, res);
   return res;
 }
 

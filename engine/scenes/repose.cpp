@@ -205,7 +205,9 @@ void ReposeConfig::validate() const {
   if (!(rest_trim >= 0.0 && rest_trim <= 0.1)) throw ConfigError("repose.rest_trim", "must lie in [0, 0.1]");
   if (rest_samples < 1) throw ConfigError("repose.rest_samples", "must be at least 1");
   non_negative(rest_profile_window, "repose.rest_profile_window");
-  positive(rest_profile_tol_deg, "repose.rest_profile_tol_deg");
+  // A heap whose fitted angle moves by degrees within the window is still flowing.
+  if (!(rest_profile_tol_deg > 0.0 && rest_profile_tol_deg <= 2.0))
+    throw ConfigError("repose.rest_profile_tol_deg", "must lie in (0, 2] deg: a heap whose angle moves more is not at rest");
   non_negative(min_collapse_time, "repose.min_collapse_time");
   positive(time_limit, "repose.time_limit");
   positive(sample_interval, "repose.sample_interval");

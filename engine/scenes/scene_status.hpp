@@ -7,7 +7,10 @@
 
 namespace demcal::engine {
 
-enum class SceneStatus { ok, unstable, not_converged, not_settled };
+// invalid: the run ended, but what it ran was not the test it measures (a triaxial
+// whose servo lost sigma3, or whose sample lost its contact network): no metric of it
+// may pass as a result.
+enum class SceneStatus { ok, unstable, not_converged, not_settled, invalid };
 
 inline const char* to_string(SceneStatus s) {
   switch (s) {
@@ -15,6 +18,7 @@ inline const char* to_string(SceneStatus s) {
     case SceneStatus::unstable: return "unstable";
     case SceneStatus::not_converged: return "not_converged";
     case SceneStatus::not_settled: return "not_settled";
+    case SceneStatus::invalid: return "invalid";
   }
   return "unknown";
 }

@@ -1,4 +1,5 @@
 #include "triaxial.hpp"
+#include "../format.hpp"
 
 #include "../errors.hpp"
 #include "../measure.hpp"
@@ -62,12 +63,6 @@ StepForecast forecast_for(const TriaxialConfig& c, const ContactParams& law) {
   return forecast_step(in, c.material.d_min, c.material.d_max, c.grain_density(), c.dt, c.dt_factor);
 }
 
-std::string fmt(double v, int prec = 4) {
-  std::ostringstream os;
-  os.precision(prec);
-  os << v;
-  return os.str();
-}
 }  // namespace
 
 StepForecast TriaxialConfig::step_forecast() const {
@@ -387,12 +382,19 @@ StageReport servo_to_equilibrium(Rig& rig, const std::string& name, double targe
   }
   rig.stop_walls();
   StageReport r = rig.report(name, s0, false, rig.stress_error(0, 5));
+  // Far below the target: the walls were still closing in on the grains (their speed
+  // is capped), not failing to settle them.
+  const std::string closing =
+      r.mean_stress < 0.1 * target_p
+          ? "; the walls, at most at triaxial.prep_strain_rate " + fmt(cfg.prep_strain_rate) +
+                " /s, were still closing in on the grains: raise prep_strain_rate or triaxial.prep_step_budget"
+          : "";
   throw StageFailed("stage " + name + " did not reach equilibrium within its budget of " +
                     std::to_string(cfg.prep_step_budget) + " steps: wall stress error " + fmt(r.stress_error) +
                     " (tolerance " + fmt(cfg.stress_tolerance) + "), unbalanced-force ratio " + fmt(r.ufr) +
                     (check_ufr ? " (tolerance " + fmt(cfg.ufr_tolerance) + ")" : " (not judged in this stage)") +
                     ", mean stress " + fmt(r.mean_stress) +
-                    " Pa for a target of " + fmt(target_p) + " Pa, porosity " + fmt(r.porosity));
+                    " Pa for a target of " + fmt(target_p) + " Pa, porosity " + fmt(r.porosity) + closing);
 }
 
 // Walls held still; run until the unbalanced-force ratio passes (dense step ii).
@@ -764,15 +766,35 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
   res.cv_effective_samples = est.effective_samples;
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
-  // sigma1 below sigma3 on average over the window: no granular material's critical
-  // state, frictionless grains included, but a sample too small or sheared too fast to
-  // carry one (50 frictionless grains at aspect ratio 4 read -0.6 +- 2.9 deg). No "; "
-  // inside: a task's warnings are joined with it.
+}
+
+// What ends a finished run as no triaxial test at all (empty: it was one). Warnings
+// grade what a result carries; these are not a result: the lateral walls lost sigma3
+// (a shear far too fast for the servo), the sample lost its contact network over the
+// window (a granular gas), or the axial stress fell below the confining one there
+// (sigma1 < sigma3 on average: no critical state does that, frictionless grains
+// included; 50 frictionless grains at aspect ratio 4 read -0.6 +- 2.9 deg).
+std::string why_invalid(const TriaxialConfig& cfg, const TriaxialResult& res) {
+  const std::string remedy = " (a lower triaxial.strain_rate or triaxial.scaled_density, more triaxial.particles)";
+  if (res.shear_stress_error_mean > cfg.invalid_stress_error)
+    return "the lateral walls lost sigma3: it strayed from p0 by " + fmt(100.0 * res.shear_stress_error_mean) +
+           "% on average during shear (limit " + fmt(100.0 * cfg.invalid_stress_error) +
+           "%), so this was no drained test at p0" + remedy;
+  const Series& s = res.series;
+  const std::size_t c_e1 = s.column("eps1"), c_z = s.column("z_all");
+  double z = 0.0;
+  int n = 0;
+  for (const auto& r : s.rows)
+    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) z += r[c_z], ++n;
+  if (n > 0 && z / n < cfg.invalid_coordination)
+    return "the sample lost its contact network: mean coordination number " + fmt(z / n, 3) +
+           " over the critical-state window (below " + fmt(cfg.invalid_coordination) +
+           ": fewer than one contact for eight grains, a collisional gas, not a solid at critical state)" + remedy;
   if (res.phi_cv_deg < 0.0)
-    res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
-                                   " deg): the axial stress fell below the confining one over the critical-state "
-                                   "window, which no critical state does, so the sample is too small or sheared too "
-                                   "fast to have one (more triaxial.particles, a lower strain_rate)");
+    return "no shear strength: phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
+           " deg), the axial stress fell below the confining one over the critical-state window, which no critical "
+           "state does: the sample is too small or sheared too fast to have one" + remedy;
+  return "";
 }
 
 // Final state and the largest dilatancy angle over any dilatancy_window of strain.
@@ -828,6 +850,31 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");
 }
 
+// What the engine's instability message cannot know: the step it names may be the
+// frictionless stages' own (larger than dt), and an overlap past the limit under a
+// stage's load is the load's, not the step's, when the stiffness is low against it
+// (the dense preparation's first stage compresses to prep_pressure_factor * p0).
+std::string instability_context(const Rig& rig, const InstabilityError& e, const TriaxialResult& res) {
+  const TriaxialConfig& cfg = rig.cfg;
+  std::string s;
+  if (rig.world.dt() != res.dt && res.dt_frictionless > 0.0)
+    s += " (that step is the frictionless stages' own, " + fmt(res.dt_frictionless / res.dt, 4) + " x dt = " +
+         fmt(res.dt) + " s: the same margin to their own critical step)";
+  if (e.quantity() != "overlap") return s;
+  // Overlap of a grain pair under a mean stress p: about p d / kn of a diameter.
+  const double kappa = cfg.material.kn / (rig.target_p * cfg.material.d_min);
+  s += "; the stage loads the grains to " + fmt(rig.target_p) + " Pa" +
+       (rig.target_p > cfg.confining_pressure * 1.0000001 ? " (triaxial.prep_pressure_factor " +
+                                                                fmt(cfg.prep_pressure_factor) + " x p0)"
+                                                          : std::string()) +
+       ", where kn / (p d_min) = " + fmt(kappa, 3);
+  if (kappa < 1000.0)
+    s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "
+         "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
+         "confining_kpa, or raise material.kn";
+  return s;
+}
+
 }  // namespace
 
 TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
@@ -866,7 +913,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   } catch (const InstabilityError& e) {
     res.outcome.status = SceneStatus::unstable;
     res.outcome.failed_stage = rig.stage;
-    res.outcome.message = std::string("stage ") + rig.stage + ": " + e.what();
+    res.outcome.message = e.what() + instability_context(rig, e, res);  // failed_stage names the stage
     finish();
     return res;
   } catch (const StageFailed& e) {
@@ -879,6 +926,13 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
 
   angles_from_series(cfg, res);
   volume_change_from_series(cfg, res);
+  if (const std::string why = why_invalid(cfg, res); !why.empty()) {
+    res.outcome.status = SceneStatus::invalid;
+    res.outcome.failed_stage = "shear";
+    res.outcome.message = why;
+    finish();
+    return res;
+  }
   judge_the_interior(cfg, res);
   warn_about_the_regime(cfg, res);
   for (const auto& w : res.outcome.warnings) res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + w;

@@ -103,6 +103,13 @@ struct TriaxialConfig {
   long sample_steps = 0;                     // > 0: a row every this many shear steps instead
   double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
   double quasi_static_inertial = 1e-3;       // warn above this inertial number
+  // Beyond these the run is no drained triaxial test and ends invalid: the lateral
+  // walls' mean stress error in shear (0.5: sigma3 half off p0 on average), and the
+  // mean coordination number over the critical-state window (below 0.25, one contact
+  // for eight grains: a collisional gas; the quick fidelity study's fast, small
+  // samples, inertial number ~0.08, keep 0.4-0.5, and its 10x denser setting 0.04-0.15).
+  double invalid_stress_error = 0.5;
+  double invalid_coordination = 0.25;
   double dilatancy_window = 0.01;            // eps1 span of the dilatancy-angle difference
   // Critical state is shear without volume change at a steady stress ratio: the
   // window is judged by its dilatancy angle (from the slope of eps_v on eps1) and by

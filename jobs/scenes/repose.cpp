@@ -56,7 +56,7 @@ std::vector<ParamSpec> repose_params() {
   // No fallback, as side_walls: tasks of jobs that leave these out keep their keys
   // (the check only turns runs that would end not_settled into results).
   p.push_back(real_param(kSection, "rest_profile_window", "rest_profile_window", nullptr).at_least(0).at_most(1000));
-  p.push_back(real_param(kSection, "rest_profile_tol_deg", "rest_profile_tol_deg", nullptr).above(0).at_most(90));
+  p.push_back(real_param(kSection, "rest_profile_tol_deg", "rest_profile_tol_deg", nullptr).above(0).at_most(2));
   p.push_back(real_param(kSection, "sample_interval", "sample_interval", d.sample_interval).above(0).at_most(10));
   // Numerics: dt or dt_factor (resolve() rejects both).
   p.push_back(real_param(kSection, "stiffness_scale", "stiffness_scale", nullptr).above(0).at_most(1));

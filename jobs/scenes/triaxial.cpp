@@ -244,6 +244,43 @@ std::string advice(const nlohmann::json& p) {
   if (i0 > c.quasi_static_inertial)
     os << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
        << c.quasi_static_inertial << ": the run will warn not quasi-static";
+  // The highest mean stress of the preparation against the stiffness: below about
+  // 1000 grains press deep into each other under the load alone (a 10 MPa test's dense
+  // preparation at 1 GPa stops on an overlap past the limit whatever the step).
+  const double p_max = c.confining_pressure * (c.packing == engine::Packing::dense ? c.prep_pressure_factor : 1.0);
+  const double kappa = c.material.kn / (p_max * c.material.d_min);
+  if (kappa < 1000.0)
+    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "kn / (p d_min) is " << kappa << " at "
+       << p_max << " Pa, the preparation's highest mean stress"
+       << (c.packing == engine::Packing::dense ? " (triaxial.prep_pressure_factor x p0)" : "")
+       << ": grains will press deep into each other, and the run may stop on an overlap past the limit whatever "
+          "the step (the seed's material: 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
+          "confining_kpa, or raise material.kn"
+       << std::setprecision(2);
+  // The critical step is an isolated pair's; a packed grain's several contacts lower
+  // the limit, and the dense preparation's frictionless stages step at the same
+  // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
+  // 0.83 did not settle.
+  const engine::StepForecast f = c.step_forecast();
+  if (!f.exceeds() && f.dt > 0.8 * f.dt_critical)
+    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "dt is " << f.dt / f.dt_critical
+       << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
+          "that limit, and above about 0.8 of it the preparation may blow up or not settle (triaxial.dt_factor)"
+       << std::setprecision(2);
+  // Random insertion leaves the box at solid fraction initial_solid_fraction (0.3);
+  // packed it is about twice that, about 21% of strain on each axis, which the walls
+  // close at prep_strain_rate at most. A budget shorter than that stops the first
+  // stage with the grains barely touching (grains of 0.01 mm step 1000x finer).
+  // The dense preparation's frictionless step is up to about twice dt.
+  const double close = 1.0 - std::cbrt(c.initial_solid_fraction / 0.6);
+  const double step = f.dt * (c.packing == engine::Packing::dense ? 2.0 : 1.0);
+  const double steps_to_close = close / (c.prep_strain_rate * step);
+  if (step > 0.0 && steps_to_close > static_cast<double>(c.prep_step_budget))
+    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "the preparation's walls, at triaxial.prep_strain_rate "
+       << c.prep_strain_rate << " /s and a step of " << step << " s, need about " << steps_to_close
+       << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
+       << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget"
+       << std::setprecision(2);
   // Given, it changes the task's key and nothing a loose sample computes.
   if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
     os << (os.tellp() > 0 ? "; " : "")

@@ -652,7 +652,7 @@ TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
 // no critical state: the task says so (fit then counts it among warned results). Where
 // another CPU's trajectory gives a phi_cv of 0-5 deg, the test checks only that
 // nothing is said.
-TEST(Cli, ANegativeCriticalStateAngleIsWarned) {
+TEST(Cli, ANegativeCriticalStateAngleIsNoResult) {
   TempDir d;
   nlohmann::json j = nlohmann::json::parse(slurp(std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"));
   j["name"] = "tall";
@@ -660,17 +660,24 @@ TEST(Cli, ANegativeCriticalStateAngleIsWarned) {
   j["grid"] = {{"aspect_ratio", {4}}};
   j["threads"] = 1;
   write(d.file("j.json"), j.dump());
-  ASSERT_EQ(run_demcal({"run", "j.json", "--workers", "1"}, d.path.string()).rc, 0);
-  const Result q = run_demcal({"query", "--format", "json", "--metrics", "phi_cv_deg"}, d.path.string());
+  const Result run = run_demcal({"run", "j.json", "--workers", "1"}, d.path.string());
+  const Result q = run_demcal({"query", "--format", "json", "--metrics", "all"}, d.path.string());
   const nlohmann::json rows = nlohmann::json::parse(q.out);
   ASSERT_EQ(rows.size(), 1u) << q.out;
-  const double cv = rows[0]["metrics"]["phi_cv_deg"].get<double>();
-  const std::string warning = rows[0].value("warning", "");
-  const bool warned = warning.find("phi_cv is negative") != std::string::npos;
-  if (warned)  // one warning among the task's, which are joined with "; "
-    EXPECT_NE(warning.find("which no critical state does, so the sample is too small"), std::string::npos) << warning;
-  EXPECT_EQ(warned, cv < 0) << cv << ": " << q.out;
-  EXPECT_LT(cv, 5.0) << "not the degenerate sample this test is about";
+  if (rows[0]["status"] == "failed") {  // the trajectory is the CPU's: one of the two outcomes
+    EXPECT_EQ(run.rc, 1);
+    const std::string error = rows[0].value("error", "");
+    EXPECT_EQ(error.rfind("invalid in stage shear: ", 0), 0u) << error;
+    EXPECT_TRUE(error.find("no shear strength: phi_cv is negative") != std::string::npos ||
+                error.find("the sample lost its contact network") != std::string::npos)
+        << error;
+    EXPECT_FALSE(rows[0]["metrics"].contains("phi_cv_deg")) << q.out;
+  } else {
+    ASSERT_EQ(run.rc, 0) << run.err;
+    const double cv = rows[0]["metrics"]["phi_cv_deg"].get<double>();
+    EXPECT_GE(cv, 0.0) << q.out;
+    EXPECT_LT(cv, 5.0) << "not the degenerate sample this test is about";
+  }
 }
 
 TEST(Cli, AnOutputFolderThatCannotBeWrittenWritesNoDatabase) {

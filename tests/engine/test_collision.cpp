@@ -68,6 +68,10 @@ TEST(CollisionScene, EnergyGainedBelowTheCriticalStepStopsTheRun) {
   const CollisionResult off = run_collision(c);
   ASSERT_TRUE(off.outcome.ok()) << off.outcome.message;
   EXPECT_GT(off.energy_final / off.energy_initial - 1.0, 0.02);
+  // Finished, but not silently: the gain is said.
+  EXPECT_EQ(off.outcome.message.rfind("total energy grew by ", 0), 0u) << off.outcome.message;
+  EXPECT_NE(off.outcome.message.find("the 2% check of collision.energy_guard was off"), std::string::npos)
+      << off.outcome.message;
   // The default step stays far from the guard: within a quarter of it. (The error of
   // a chaotic gas moves with the rounding of the build: 3.2e-3 in an SSE2 build,
   // -DDEMCAL_NATIVE=OFF, below 2e-3 in the AVX2 and AVX-512 ones.)

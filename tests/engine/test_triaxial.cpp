@@ -319,6 +319,25 @@ TEST(TriaxialScene, AnInteriorWithTooFewGrainsIsNotMeasured) {
   }
 }
 
+// Sheared at 1 /s (3,000 times the default rate) the servo cannot hold sigma3: the
+// lateral stress runs to hundreds of p0, and the angles (87 deg and 75 deg at theta
+// 30 deg were stored as a result) are no drained test's. The run ends invalid, in
+// shear, saying why; nothing of it is a result.
+TEST(TriaxialScene, AShearTheServoCannotFollowIsNoResult) {
+  TriaxialConfig c = small(Packing::dense);
+  c.particles = 200;
+  c.strain_rate = 1.0;
+  c.axial_strain = 0.05;
+  c.cv_from = 0.03;
+  c.cv_to = 0.05;
+  const TriaxialResult r = run_triaxial(c);
+  EXPECT_EQ(r.outcome.status, SceneStatus::invalid) << r.outcome.message;
+  EXPECT_EQ(r.outcome.failed_stage, "shear");
+  EXPECT_NE(r.outcome.message.find("the lateral walls lost sigma3: it strayed from p0 by "), std::string::npos)
+      << r.outcome.message;
+  EXPECT_GT(r.shear_stress_error_mean, c.invalid_stress_error);
+}
+
 TEST(TriaxialScene, WallAndLoveWeberStressesAgreeInEquilibrium) {
   const TriaxialResult& r = cached("lw");
   ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;

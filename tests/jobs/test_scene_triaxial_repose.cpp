@@ -488,6 +488,33 @@ TEST(TriaxialReposeScenes, ANotQuasiStaticShearIsNotedBeforeTheRun) {
   EXPECT_EQ(notes[0].rfind("task #1: inertial number", 0), 0u) << notes[0];
 }
 
+// What the inputs already say will go wrong in preparation, said before the run: a
+// load the stiffness cannot carry, walls too slow to pack the grains within the
+// budget, a step close to the critical one.
+TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
+  auto notes_of = [](const json& j) {
+    std::string all;
+    for (const auto& n : parse(j).notes) all += n + "\n";
+    return all;
+  };
+  const json base = triaxial_base();
+  const std::string plain = notes_of(base);
+  for (const char* what : {"kn / (p d_min)", "the preparation's walls", "of the critical step of an isolated pair"})
+    EXPECT_EQ(plain.find(what), std::string::npos) << plain;
+  json j = base;
+  j["triaxial"]["confining_kpa"] = 10000;  // a dense preparation at 1 GPa: kn / (p d_min) = 30
+  EXPECT_NE(notes_of(j).find("kn / (p d_min) is 30 at 1e+09 Pa, the preparation's highest mean stress"),
+            std::string::npos)
+      << notes_of(j);
+  j = base;
+  j["material"]["diameter"] = {{"min", 1e-5}, {"max", 2e-5}};  // a 1000x finer step
+  EXPECT_NE(notes_of(j).find("need about"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("more than triaxial.prep_step_budget (400000)"), std::string::npos) << notes_of(j);
+  j = base;
+  j["triaxial"]["dt_factor"] = 0.7;
+  EXPECT_NE(notes_of(j).find("dt is 0.968 of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
+}
+
 class BadTriaxialReposeJob : public ::testing::TestWithParam<Bad> {};
 
 TEST_P(BadTriaxialReposeJob, RejectedNamingTheField) {
