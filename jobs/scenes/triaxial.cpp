@@ -281,6 +281,13 @@ std::string advice(const nlohmann::json& p) {
        << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget"
        << std::setprecision(2);
+  // Without friction no tangential force turns a grain, spins stay zero, and the
+  // rolling resistance never acts: tasks that differ only in eta run the same work
+  // (bit for bit) under different keys.
+  if (c.material.friction_angle == 0.0 && c.material.rolling_eta != 0.0)
+    os << (os.tellp() > 0 ? "; " : "")
+       << "material.eta changes nothing at theta_deg 0: without friction no tangential force turns a grain, so "
+          "no rolling resistance acts (the task runs the work of eta 0)";
   // Given, it changes the task's key and nothing a loose sample computes.
   if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
     os << (os.tellp() > 0 ? "; " : "")
