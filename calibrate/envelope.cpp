@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <map>
+#include <sstream>
 #include <set>
 #include <stdexcept>
 
@@ -82,12 +83,25 @@ std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& jo
     auto& pe = by[{th, et}];
     pe.theta = th;
     pe.eta = et;
-    if (r.task.status != "done") continue;
+    const double s3 = r.params["confining_kpa"].get<double>();
+    const db::TaskMessage msg = db::task_message(r.task);
+    std::ostringstream why;
+    why << s3 << " kPa: task " << r.task.id << " ";
+    if (r.task.status != "done") {
+      std::string error = msg.error;
+      if (error.size() > 160) error = error.substr(0, error.rfind(' ', 156)) + " ...";
+      why << (r.task.status == "failed" ? "failed: " + error : "not finished (" + r.task.status + ")");
+      pe.left_out.push_back(why.str());
+      continue;
+    }
     double q = NAN;
     for (const auto& m : r.metrics)
       if (m.first == "q_peak_pa") q = m.second;
-    if (!std::isfinite(q)) continue;
-    const double s3 = r.params["confining_kpa"].get<double>();
+    if (!std::isfinite(q)) {
+      pe.left_out.push_back(why.str() + "has no q_peak_pa");
+      continue;
+    }
+    if (!msg.warning.empty() && pe.warned++ == 0) pe.first_warning = msg.warning;
     pe.sigma3_kpa.push_back(s3);
     pe.sigma1_kpa.push_back(s3 + q / 1000.0);
     ++usable;

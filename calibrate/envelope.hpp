@@ -26,6 +26,10 @@ struct PointEnvelope {
   std::vector<double> sigma3_kpa, sigma1_kpa;
   Envelope env;
   std::string note;  // why no envelope (one pressure only, ...)
+  // Tasks of the point without a peak: "10 kPa: task 5 failed: invalid in stage shear: ...".
+  std::vector<std::string> left_out;
+  int warned = 0;             // peaks used whose task carries warnings
+  std::string first_warning;  // the first of them, as the task stores it
 };
 
 // Per (theta, eta) of the job: sigma3 = confining_kpa, sigma1 = sigma3 + q_peak_pa / 1000

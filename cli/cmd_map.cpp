@@ -93,6 +93,38 @@ void add_map(CLI::App& app, int& exit_code) {
   });
 }
 
+// What the table's numbers stand on: the peaks left out and why, the results used
+// that carry warnings (a fast shear's peaks, spikes), and a cohesion spheres cannot
+// have, which such peaks make.
+void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, const std::string& hint) {
+  int warned = 0, used = 0;
+  std::string first;
+  for (const auto& e : envs) {
+    for (const auto& why : e.left_out)
+      std::cout << "left out at theta " << e.theta << ", eta " << e.eta << ": " << why << "\n";
+    used += static_cast<int>(e.sigma3_kpa.size());
+    if (e.warned > 0 && warned == 0) first = e.first_warning;
+    warned += e.warned;
+  }
+  if (warned > 0) {
+    if (const auto semi = first.find("; "); semi != std::string::npos) first = first.substr(0, semi) + " (and more)";
+    std::cout << "warning: " << warned << " of the " << used << " peaks used carry warnings (" << hint << "), e.g.: " << first
+              << "\n";
+  }
+  // Beyond two standard errors; with two pressures (no standard error), beyond a tenth
+  // of their mean.
+  const auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return v.empty() ? 0.0 : s / static_cast<double>(v.size());
+  };
+  for (const auto& e : envs)
+    if (e.note.empty() && e.env.c > (std::isfinite(e.env.c_se) ? 2.0 * e.env.c_se : 0.1 * mean(e.sigma3_kpa)))
+      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": cohesion " << e.env.c
+                << (std::isfinite(e.env.c_se) ? " +- " + std::to_string(e.env.c_se) : std::string()) << " kPa, which cohesionless grains cannot have: the peaks bend the envelope (a shear too fast or a "
+                   "sample too small at some pressure; the warnings above)\n";
+}
+
 void add_envelope(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("envelope", "Mohr-Coulomb friction angle and cohesion across confining pressures");
   struct Args {
@@ -145,6 +177,7 @@ void add_envelope(CLI::App& app, int& exit_code) {
                    "N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak); +- one standard error\n";
       if (unknown_se)
         std::cout << "n/a: the line through two peaks fits them exactly and has no standard error; it takes three\n";
+      print_envelope_caveats(envs, jobs::query_hint(a->db, job));
       return kOk;
     });
   });

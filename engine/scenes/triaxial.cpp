@@ -174,6 +174,8 @@ Metrics TriaxialResult::metrics() const {
                      {"cv_dilatancy_deg", cv_dilatancy_deg},
                      {"cv_drift_deg", cv_drift_deg},
                      {"cv_drift_se_deg", cv_drift_se_deg},
+                     {"cv_coordination", cv_coordination},
+                     {"cv_rows_in_extension", static_cast<double>(cv_rows_in_extension)},
                      {"phi_peak_interior_deg", phi_peak_interior_deg},
                      {"phi_cv_interior_deg", phi_cv_interior_deg},
                      {"q_peak_pa", q_peak},
@@ -768,26 +770,47 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
 }
 
+// The window's mean coordination and its rows in extension (sigma1 below the lateral
+// walls' mean), and whether the top platen lost the sample (sigma1 = 0 on a row).
+int window_state(const TriaxialConfig& cfg, TriaxialResult& res) {
+  const Series& s = res.series;
+  const std::size_t c_e1 = s.column("eps1"), c_z = s.column("z_all"), c_s1 = s.column("sigma1"),
+                    c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3");
+  double z = 0.0;
+  int n = 0, lost = 0;
+  res.cv_rows_in_extension = 0;
+  for (const auto& r : s.rows) {
+    if (!(r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9)) continue;
+    z += r[c_z];
+    ++n;
+    lost += r[c_s1] <= 0.0;
+    res.cv_rows_in_extension += r[c_s1] < 0.5 * (r[c_s2] + r[c_s3]);
+  }
+  res.cv_coordination = n > 0 ? z / n : NAN;
+  return lost;
+}
+
 // What ends a finished run as no triaxial test at all (empty: it was one). Warnings
 // grade what a result carries; these are not a result: the lateral walls lost sigma3
-// (a shear far too fast for the servo), the sample lost its contact network over the
-// window (a granular gas), or the axial stress fell below the confining one there
-// (sigma1 < sigma3 on average: no critical state does that, frictionless grains
-// included; 50 frictionless grains at aspect ratio 4 read -0.6 +- 2.9 deg).
-std::string why_invalid(const TriaxialConfig& cfg, const TriaxialResult& res) {
+// (a shear far too fast for the servo), the top platen lost the sample (sigma1 = 0 on
+// a row of the window: the walls' stress no longer measures it), the sample lost its
+// contact network over the window (a granular gas), or the axial stress fell below
+// the confining one there on average (sigma1 < sigma3: no critical state does that,
+// frictionless grains included; 50 frictionless grains at aspect ratio 4 read
+// -0.6 +- 2.9 deg).
+std::string why_invalid(const TriaxialConfig& cfg, TriaxialResult& res) {
   const std::string remedy = " (a lower triaxial.strain_rate or triaxial.scaled_density, more triaxial.particles)";
+  const int lost = window_state(cfg, res);
   if (res.shear_stress_error_mean > cfg.invalid_stress_error)
     return "the lateral walls lost sigma3: it strayed from p0 by " + fmt(100.0 * res.shear_stress_error_mean) +
            "% on average during shear (limit " + fmt(100.0 * cfg.invalid_stress_error) +
            "%), so this was no drained test at p0" + remedy;
-  const Series& s = res.series;
-  const std::size_t c_e1 = s.column("eps1"), c_z = s.column("z_all");
-  double z = 0.0;
-  int n = 0;
-  for (const auto& r : s.rows)
-    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) z += r[c_z], ++n;
-  if (n > 0 && z / n < cfg.invalid_coordination)
-    return "the sample lost its contact network: mean coordination number " + fmt(z / n, 3) +
+  if (lost > 0)
+    return "the top and bottom walls lost the sample: sigma1 was 0 on " + std::to_string(lost) + " of the " +
+           std::to_string(res.cv_samples) + " rows of the critical-state window (grains no longer pressed "
+           "against them), so the walls' stress measures no critical state" + remedy;
+  if (res.cv_coordination < cfg.invalid_coordination)
+    return "the sample lost its contact network: mean coordination number " + fmt(res.cv_coordination, 3) +
            " over the critical-state window (below " + fmt(cfg.invalid_coordination) +
            ": fewer than one contact for eight grains, a collisional gas, not a solid at critical state)" + remedy;
   if (res.phi_cv_deg < 0.0)
@@ -845,6 +868,11 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    (std::isnan(res.phi_cv_interior_deg) ? std::string("not measured")
                                                                         : fmt(res.phi_cv_interior_deg, 3) + " deg") +
                                    " in the interior)");
+  if (res.cv_rows_in_extension > 0)
+    res.outcome.warnings.push_back("sigma1 fell below sigma3 on " + std::to_string(res.cv_rows_in_extension) + " of the " +
+                                   std::to_string(res.cv_samples) +
+                                   " rows of the critical-state window (extension, where the test compresses): the "
+                                   "sample is too small or sheared too fast for a steady critical state there");
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");

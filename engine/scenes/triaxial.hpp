@@ -177,6 +177,11 @@ struct TriaxialResult {
   // in shear opposes the systematic deformation and holds part of the axial load.
   double phi_peak_interior_deg = 0, phi_cv_interior_deg = 0;
   int cv_samples = 0;
+  // Mean grain-grain coordination number over the critical-state window (what the
+  // invalid test reads), and the window's rows where the axial stress fell below the
+  // lateral one (sigma1 < sigma3: extension, no compression test's state).
+  double cv_coordination = NAN;
+  int cv_rows_in_extension = 0;
   double q_peak = 0;                // [Pa]
   double porosity_initial = 0;      // after preparation (start of shear)
   double porosity_final = 0;

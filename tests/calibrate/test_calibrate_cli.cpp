@@ -831,6 +831,33 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   EXPECT_EQ(p, 3);
   EXPECT_NEAR(phi, phi_peak_fn(th, et), 1e-3);
   EXPECT_NEAR(c, 0.0, 1e-3);
+  EXPECT_EQ(r.out.find("warning:"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("left out"), std::string::npos) << r.out;
+  // A peak that failed is named with its reason, the peaks used that carry warnings
+  // are counted, and a cohesion the grains cannot have is said.
+  const std::string db = d.file("demcal.db");
+  std::int64_t failed = 0, warned = 0;
+  std::string shifted;  // the point whose peaks all rise by 50 kPa: a line with an intercept
+  for (const auto& t : db::Store(db, true).tasks("mc")) {
+    const auto q = nlohmann::json::parse(t.params_json);
+    if (q["theta_deg"] == 20 && q["eta"] == 0.1 && q["confining_kpa"] == 50.0) failed = t.id;
+    if (q["theta_deg"] == 30 && q["eta"] == 0.2) {
+      shifted += (shifted.empty() ? "" : ", ") + std::to_string(t.id);
+      if (q["confining_kpa"] == 200.0) warned = t.id;
+    }
+  }
+  sql(db, "UPDATE tasks SET status = 'failed', error = 'invalid in stage shear: the lateral walls lost sigma3' WHERE id = " +
+              std::to_string(failed) + "; UPDATE tasks SET error = 'warning: not quasi-static: fast' WHERE id = " +
+              std::to_string(warned) + "; UPDATE metrics SET value = value + 50000 WHERE name = 'q_peak_pa' AND task_id IN (" +
+              shifted + ")");
+  const auto bad = run_demcal({"envelope", "--job", "mc"}, d.path.string());
+  ASSERT_EQ(bad.rc, 0) << bad.err;
+  EXPECT_NE(bad.out.find("left out at theta 20, eta 0.1: 50 kPa: task " + std::to_string(failed) +
+                         " failed: invalid in stage shear: the lateral walls lost sigma3"),
+            std::string::npos)
+      << bad.out;
+  EXPECT_NE(bad.out.find("warning: 1 of the 11 peaks used carry warnings"), std::string::npos) << bad.out;
+  EXPECT_NE(bad.out.find("warning: theta 30, eta 0.2: cohesion "), std::string::npos) << bad.out;
   // One pressure only: an error, and no table of rows that all say so.
   const auto one = run_demcal({"envelope", "--job", "mc50"}, d.path.string());
   EXPECT_EQ(one.rc, 2);
