@@ -285,7 +285,8 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
       cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics +
                                     (metrics.find(" and ") == std::string::npos ? " has" : " have") +
                                     " no value at a corner (" + g +
-                                    "): the surrogate bridges the gap there; rerun or replace those tasks");
+                                    "): the surrogate bridges the gap there; rerun failed or unfinished tasks "
+                                    "there, and change the settings of invalid ones (a rerun repeats them)");
   }
   // A point that lost a replica averages the others: with replicas that differ
   // systematically (another packing) its mean moves by their spread, and nothing in

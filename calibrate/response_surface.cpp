@@ -70,7 +70,8 @@ std::string GridPoint::without_value() const {
   const auto add = [&](int n, const char* what) {
     if (n > 0) s += (s.empty() ? "" : ", ") + std::to_string(n) + " " + what;
   };
-  add(failed, "failed");
+  add(failed - invalid, "failed");
+  add(invalid, "invalid (no test: rerunning repeats it)");
   add(unfinished, "not finished");
   add(missing, "without the metric");
   return s;
@@ -315,6 +316,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
       }
     } else if (st == "failed") {
       ++p.failed;
+      p.invalid += row.r.task.error.rfind("invalid in stage ", 0) == 0;
     } else {
       ++p.unfinished;
     }

@@ -22,6 +22,7 @@ struct GridPoint {
   std::vector<std::int64_t> tasks;  // the task each value came from (empty for synthetic surfaces)
   double mean = kNaN, sd = kNaN, se = kNaN;  // sd, se: NaN with fewer than 2 replicas
   int failed = 0, unfinished = 0, missing = 0;  // tasks without a value, by reason
+  int invalid = 0;  // of the failed, those that ran but were no test (a triaxial's servo lost): a rerun repeats them
   // A node of the job's (theta, eta) grid with no task in this database at all (a
   // shard not merged yet, a part not run): a hole as much as a failed task.
   bool absent = false;

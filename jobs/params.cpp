@@ -73,7 +73,11 @@ nlohmann::json check_curve(const nlohmann::json& v, const std::string& path) {
       if (!std::isfinite(x)) throw JobError(ai, "must be finite, got " + list[i].dump());
       if (std::string(k) == "d" && !(x > 0.0 && x <= 1.0)) throw JobError(ai, "a size must be in (0, 1] m, got " + fmt(x));
       if (std::string(k) == "percent_finer" && !(x >= 0.0 && x <= 100.0))
-        throw JobError(ai, "must be in [0, 100] percent, got " + fmt(x));
+        throw JobError(ai, "must be in [0, 100] percent, got " + list[i].dump());  // every digit: 100.0000001 is not 100
+      // A sieve list written largest first would otherwise read as min above max.
+      if (std::string(k) == "d" && i > 0 && !(x > list[i - 1].get<double>()))
+        throw JobError(ai, "the sizes must increase (smallest sieve first), got " + list[i].dump() + " after " +
+                               list[i - 1].dump());
       vals.push_back(x == 0.0 ? 0.0 : x);  // -0.0 is 0
     }
     out[k] = std::move(vals);

@@ -235,8 +235,9 @@ void ReposeConfig::validate() const {
   }
   if (side_walls == SideWalls::periodic && depth < 2.0 * reach) {
     std::ostringstream os;
-    os << "slab depth " << depth << " m is below twice the interaction reach " << reach
-       << " m (periodic images would interact); use at least " << std::ceil(20.0 * reach / d_mean) / 10.0;
+    os << "slab depth " << depth << " m is below twice the interaction reach, 2 x " << reach
+       << " m (the largest diameter plus the neighbour skin): periodic images would interact; use at least "
+       << std::ceil(20.0 * reach / d_mean) / 10.0 << " (mean diameters of " << d_mean << " m)";
     throw ConfigError("repose.slab_depth_diameters", os.str());
   }
   if (column_width < 2.0 * material.d_max)
@@ -686,6 +687,14 @@ void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapRe
        << " (angle error " << fit.angle_err_deg << " deg): the heap is too small for its angle to be a measurement "
        << "(a larger repose.column_width and column_height give it more)";
     res.outcome.warnings.push_back(os.str());
+  } else if (fit.angle_err_deg > ReposeResult::kMaxFitErrDeg) {
+    // Enough bins, but no straight slope through them (a staircase of grain layers,
+    // a concave heap): 30.25 +- 7.8 deg over 6 bins was stored with nothing said.
+    std::ostringstream os;
+    os << "the slope fit's standard error is " << fit.angle_err_deg << " deg (above " << ReposeResult::kMaxFitErrDeg
+       << "): the profile over its " << fit.points << " bins is no straight slope, and the angle is a line through "
+       << "it (a larger column, or the profile in the HDF5 file, shows its shape)";
+    res.outcome.warnings.push_back(os.str());
   }
   res.repose_upper_deg = fit.upper_angle_deg;
   res.repose_lower_deg = fit.lower_angle_deg;
@@ -732,7 +741,8 @@ void finish_collapse(const ReposeConfig& cfg, const ReposeSizes& z, const World&
     res.time_to_rest_s = still.since;  // still since at least then
     std::ostringstream os;
     os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
-       << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start";
+       << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start, "
+       << "and the runout where the front stood at the end (a grain at the toe may still move it by a bin or two)";
     res.outcome.warnings.push_back(os.str());
   } else {
     res.time_to_rest_s = w.time() - (cfg.rest_samples - 1) * chunk * w.dt();  // first quiet sample
@@ -834,6 +844,20 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     res.outcome.message = e.what();
   }
   res.steps = run.steps_total;
+  // A heap that came to rest with no slope to fit (a profile of one or two bins) has
+  // no angle: no result, as a triaxial that was no test has none.
+  if (res.outcome.ok() && std::isnan(res.repose_deg)) {
+    const auto it = std::find_if(res.outcome.warnings.begin(), res.outcome.warnings.end(),
+                                 [](const std::string& w) { return w.rfind("no angle of repose: ", 0) == 0; });
+    res.outcome.status = SceneStatus::invalid;
+    res.outcome.failed_stage = "measure";
+    if (it != res.outcome.warnings.end()) {
+      res.outcome.message = *it + " (a larger column, or a narrower repose.bin_width)";
+      res.outcome.warnings.erase(it);
+    } else {
+      res.outcome.message = "no angle of repose was measured";
+    }
+  }
   for (const auto& wmsg : res.outcome.warnings) {
     if (!res.outcome.message.empty()) res.outcome.message += "; ";
     res.outcome.message += wmsg;

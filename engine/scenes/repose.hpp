@@ -141,6 +141,7 @@ struct ReposeResult {
   double repose_deg = 0, repose_fit_err_deg = 0, steepest_deg = 0;
   int fit_points = 0;
   static constexpr int kMinSlopeBins = 6;  // fewer: the run warns that the angle is no measurement
+  static constexpr double kMaxFitErrDeg = 3.0;  // a larger standard error: no straight slope, warned
   double repose_upper_deg = 0, repose_lower_deg = 0;  // the fit over the upper / lower half of its heights
   double fit_slope = 0, fit_intercept = 0, fit_x_upper = 0, fit_x_lower = 0;  // line h = intercept + slope x
   double runout_m = 0;        // front - gate position

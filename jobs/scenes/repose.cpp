@@ -150,7 +150,12 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     double depth = pre.depth_diameters;
     if (p.contains("size_distribution")) {
       const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
-      depth *= 0.5 * (d0 + d1) / material_from(p).grading().mean();
+      const double d_mean = material_from(p).grading().mean();
+      depth *= 0.5 * (d0 + d1) / d_mean;
+      // A wide grading's largest grain may reach past the preset depth: the default
+      // is then the least a periodic slab allows (the engine's bound, rounded up).
+      const double least = 2.0 * (d1 + 0.1 * d0) / d_mean;
+      if (depth < least) depth = std::ceil(10.0 * least) / 10.0;
     }
     p["depth_diameters"] = depth;
   }

@@ -305,7 +305,7 @@ TEST(TriaxialReposeScenes, AGradingCurveThatIsNotOneSaysWhereAndWhy) {
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"].erase(6); }),
                "material.diameter.grading", "one percentage per size");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["d"][2] = 0.0009; }),
-               "material.diameter.grading", "point 3 (d = 0.0009 m): sizes must increase");
+               "material.diameter.grading.d[2]", "the sizes must increase (smallest sieve first), got 0.0009 after 0.001");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["grading"]["percent_finer"][6] = 99; }),
                "material.diameter.grading", "100%");
   EXPECT_PRED3(starts, with([](json& j) { j["material"]["diameter"]["distribution"] = "uniform"; }),
@@ -517,6 +517,20 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   j = base;
   j["triaxial"]["dt_factor"] = 0.7;
   EXPECT_NE(notes_of(j).find("dt is 0.968 of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
+}
+
+// A wide grading's largest grain reaches past the preset's slab depth: the default is
+// then the least a periodic slab allows, not a refusal to set depth_diameters by hand
+// (it was "slab depth 0.00315 m is below twice the interaction reach 0.00201 m").
+TEST(TriaxialReposeScenes, TheDefaultSlabHoldsAWideGradingsLargestGrain) {
+  json j = repose_base();
+  j["repose"].erase("depth_diameters");
+  j["material"]["diameter"] = {{"grading", {{"d", {1e-4, 1e-3, 2e-3}}, {"percent_finer", {0, 5, 100}}}}};
+  const Job job = parse(j);
+  ASSERT_FALSE(job.tasks.empty());
+  const auto& p = job.tasks[0].params;
+  const double d_mean = demcal::jobs::material_from(p).grading().mean();
+  EXPECT_GE(p["depth_diameters"].get<double>() * d_mean, 2.0 * (2e-3 + 0.1 * 1e-4)) << p.dump();
 }
 
 class BadTriaxialReposeJob : public ::testing::TestWithParam<Bad> {};
