@@ -626,6 +626,19 @@ void record_final_counts(const Counts& c, RunSummary& s) {
   s.unfinished = c.total - c.done - c.failed;
 }
 
+namespace {
+// An axis value for reading: a computed one (a refinement point) at 10 significant
+// digits, not 0.15239000000000003; a whole real keeps its ".0", as the job wrote it.
+std::string axis_text(const nlohmann::json& v) {
+  if (!v.is_number_float()) return v.dump();
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.10g", v.get<double>());
+  std::string s = buf;
+  if (s.find_first_of(".eni") == std::string::npos) s += ".0";
+  return s;
+}
+}  // namespace
+
 std::string describe_task(const Job& job, std::size_t index, std::int64_t task_id) {
   const std::string s = "task " + std::to_string(task_id);
   if (index >= job.tasks.size()) return s;
@@ -633,7 +646,7 @@ std::string describe_task(const Job& job, std::size_t index, std::int64_t task_i
   // An axis value that is the default may be left out of the resolved task (a
   // "uniform" grading keeps the key it always had).
   const nlohmann::json& p = job.tasks[index].params;
-  for (const auto& a : job.axes) axes += " " + a + "=" + (p.contains(a) ? p.at(a).dump() : std::string("default"));
+  for (const auto& a : job.axes) axes += " " + a + "=" + (p.contains(a) ? axis_text(p.at(a)) : std::string("default"));
   if (job.replicas > 1) axes += std::string(" seed=") + job.tasks[index].params.at("seed").dump();
   return s + " (#" + std::to_string(index) + (axes.empty() ? "" : ":" + axes) + ")";
 }
