@@ -285,16 +285,17 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
       cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics +
                                     (metrics.find(" and ") == std::string::npos ? " has" : " have") +
                                     " no value at a corner (" + g +
-                                    "): the surrogate bridges the gap there; rerun failed or unfinished tasks "
-                                    "there, and change the settings of invalid ones (a rerun repeats them)");
+                                    "): the surrogate bridges the gap there; finish unfinished tasks (demcal run), "
+                                    "merge or run missing ones, and change the settings of failed or invalid ones "
+                                    "(a rerun repeats them, unless a worker was killed)");
   }
   // A point that lost a replica averages the others: with replicas that differ
   // systematically (another packing) its mean moves by their spread, and nothing in
   // the numbers shows it. Once a job: its metrics share the tasks.
-  std::set<std::string> told;
+  std::set<std::string> told;  // job and list: a metric missing on one task has its own
   for (const auto& rs : cal.surfaces)
-    if (rs.partials() > 0 && told.insert(rs.job).second)
-      cal.result.warnings.push_back(std::to_string(rs.partials()) + " grid point(s) of job " + rs.job +
+    if (rs.partials() > 0 && told.insert(rs.job + "\n" + rs.partial_list()).second)
+      cal.result.warnings.push_back(std::to_string(rs.partials()) + " point(s) of job " + rs.job +
                                     " have a value from fewer replicas than they have tasks (" + rs.partial_list() +
                                     "): their means rest on the replicas that finished, and may be biased; demcal "
                                     "status shows why tasks failed, demcal run finishes unfinished ones");

@@ -65,13 +65,13 @@ int ResponseSurface::holes() const {
 }
 
 std::string GridPoint::without_value() const {
-  if (absent) return "not in this database";
+  if (absent) return "no task here: not in this database, or not selected";
   std::string s;
   const auto add = [&](int n, const char* what) {
     if (n > 0) s += (s.empty() ? "" : ", ") + std::to_string(n) + " " + what;
   };
   add(failed - invalid, "failed");
-  add(invalid, "invalid (no test: rerunning repeats it)");
+  add(invalid, "invalid (no test)");
   add(unfinished, "not finished");
   add(missing, "without the metric");
   return s;

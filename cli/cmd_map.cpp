@@ -83,7 +83,8 @@ void add_map(CLI::App& app, int& exit_code) {
                   << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
       if (!overlay && other_pins > 0)
         std::cout << "no fit drawn: job " << job << "'s " << other_pins << " fit(s) were made on other --where pins "
-                  << "than this map's (" << (pins.empty() ? std::string("none") : pins) << "), another surface\n";
+                  << "than this map's (" << (pins.empty() ? std::string("none") : pins)
+                  << "); a fit is drawn on the map of the pins it was made on\n";
       if (overlay)
         std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
                   << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";
@@ -111,18 +112,20 @@ void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, c
     std::cout << "warning: " << warned << " of the " << used << " peaks used carry warnings (" << hint << "), e.g.: " << first
               << "\n";
   }
-  // Beyond two standard errors; with two pressures (no standard error), beyond a tenth
-  // of their mean.
   const auto mean = [](const std::vector<double>& v) {
     double s = 0;
     for (double x : v) s += x;
     return v.empty() ? 0.0 : s / static_cast<double>(v.size());
   };
+  // Beyond two standard errors and a fiftieth of the mean pressure (on exact data both
+  // c and its error are round-off); with two pressures, beyond a tenth of their mean.
   for (const auto& e : envs)
-    if (e.note.empty() && e.env.c > (std::isfinite(e.env.c_se) ? 2.0 * e.env.c_se : 0.1 * mean(e.sigma3_kpa)))
+    if (e.note.empty() && e.env.c > (std::isfinite(e.env.c_se) ? std::max(2.0 * e.env.c_se, 0.02 * mean(e.sigma3_kpa))
+                                                               : 0.1 * mean(e.sigma3_kpa)))
       std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": cohesion " << e.env.c
-                << (std::isfinite(e.env.c_se) ? " +- " + std::to_string(e.env.c_se) : std::string()) << " kPa, which cohesionless grains cannot have: the peaks bend the envelope (a shear too fast or a "
-                   "sample too small at some pressure; the warnings above)\n";
+                << (std::isfinite(e.env.c_se) ? " +- " + std::to_string(e.env.c_se) : std::string()) << " kPa from grains without cohesion: the straight line through the peaks has it from the "
+                   "envelope's curvature (a dense sample's peak angle falls with pressure) or from peaks of a shear "
+                   "too fast or a sample too small (the warnings above); phi at c = 0 is the other reading\n";
 }
 
 void add_envelope(CLI::App& app, int& exit_code) {

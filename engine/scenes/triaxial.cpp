@@ -176,6 +176,7 @@ Metrics TriaxialResult::metrics() const {
                      {"cv_drift_se_deg", cv_drift_se_deg},
                      {"cv_coordination", cv_coordination},
                      {"cv_rows_in_extension", static_cast<double>(cv_rows_in_extension)},
+                     {"cv_rows_unloaded", static_cast<double>(cv_rows_unloaded)},
                      {"phi_peak_interior_deg", phi_peak_interior_deg},
                      {"phi_cv_interior_deg", phi_cv_interior_deg},
                      {"q_peak_pa", q_peak},
@@ -770,55 +771,60 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
 }
 
-// The window's mean coordination and its rows in extension (sigma1 below the lateral
-// walls' mean), and whether the top platen lost the sample (sigma1 = 0 on a row).
-int window_state(const TriaxialConfig& cfg, TriaxialResult& res) {
+}  // namespace
+
+// The window's mean coordination, its rows in extension (sigma1 below the lateral
+// walls' mean) and its rows where the top and bottom walls carried nothing (sigma1 = 0).
+void judge_window(const TriaxialConfig& cfg, TriaxialResult& res) {
   const Series& s = res.series;
   const std::size_t c_e1 = s.column("eps1"), c_z = s.column("z_all"), c_s1 = s.column("sigma1"),
                     c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3");
   double z = 0.0;
-  int n = 0, lost = 0;
-  res.cv_rows_in_extension = 0;
+  int n = 0;
+  res.cv_rows_in_extension = res.cv_rows_unloaded = 0;
   for (const auto& r : s.rows) {
     if (!(r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9)) continue;
     z += r[c_z];
     ++n;
-    lost += r[c_s1] <= 0.0;
+    res.cv_rows_unloaded += r[c_s1] <= 0.0;
     res.cv_rows_in_extension += r[c_s1] < 0.5 * (r[c_s2] + r[c_s3]);
   }
   res.cv_coordination = n > 0 ? z / n : NAN;
-  return lost;
 }
 
 // What ends a finished run as no triaxial test at all (empty: it was one). Warnings
 // grade what a result carries; these are not a result: the lateral walls lost sigma3
-// (a shear far too fast for the servo), the top platen lost the sample (sigma1 = 0 on
-// a row of the window: the walls' stress no longer measures it), the sample lost its
-// contact network over the window (a granular gas), or the axial stress fell below
-// the confining one there on average (sigma1 < sigma3: no critical state does that,
-// frictionless grains included; 50 frictionless grains at aspect ratio 4 read
-// -0.6 +- 2.9 deg).
+// (a shear far too fast for the servo), the top and bottom walls lost the sample
+// (sigma1 = 0 on more than a tenth of the window's rows, at least two: the walls'
+// stress no longer measures it; one row is warned), the sample lost its contact
+// network over the window (a granular gas), or the axial stress fell below the
+// confining one there on average beyond its noise (phi_cv + 2 se < 0: no critical
+// state does that, frictionless grains included; within the noise, as 50 frictionless
+// grains at aspect ratio 4 read -0.6 +- 2.9 deg, it is warned).
 std::string why_invalid(const TriaxialConfig& cfg, TriaxialResult& res) {
   const std::string remedy = " (a lower triaxial.strain_rate or triaxial.scaled_density, more triaxial.particles)";
-  const int lost = window_state(cfg, res);
+  judge_window(cfg, res);
   if (res.shear_stress_error_mean > cfg.invalid_stress_error)
     return "the lateral walls lost sigma3: it strayed from p0 by " + fmt(100.0 * res.shear_stress_error_mean) +
            "% on average during shear (limit " + fmt(100.0 * cfg.invalid_stress_error) +
            "%), so this was no drained test at p0" + remedy;
-  if (lost > 0)
-    return "the top and bottom walls lost the sample: sigma1 was 0 on " + std::to_string(lost) + " of the " +
-           std::to_string(res.cv_samples) + " rows of the critical-state window (grains no longer pressed "
+  if (res.cv_rows_unloaded > std::max(1.0, 0.1 * res.cv_samples))
+    return "the top and bottom walls lost the sample: sigma1 was 0 on " + std::to_string(res.cv_rows_unloaded) +
+           " of the " + std::to_string(res.cv_samples) + " rows of the critical-state window (grains no longer pressed "
            "against them), so the walls' stress measures no critical state" + remedy;
   if (res.cv_coordination < cfg.invalid_coordination)
     return "the sample lost its contact network: mean coordination number " + fmt(res.cv_coordination, 3) +
            " over the critical-state window (below " + fmt(cfg.invalid_coordination) +
            ": fewer than one contact for eight grains, a collisional gas, not a solid at critical state)" + remedy;
-  if (res.phi_cv_deg < 0.0)
+  if (res.phi_cv_deg + 2.0 * (std::isfinite(res.phi_cv_se_deg) ? res.phi_cv_se_deg : 0.0) < 0.0)
     return "no shear strength: phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
-           " deg), the axial stress fell below the confining one over the critical-state window, which no critical "
-           "state does: the sample is too small or sheared too fast to have one" + remedy;
+           " deg, below zero by more than two standard errors), the axial stress fell below the confining one over "
+           "the critical-state window, which no critical state does: the sample is too small or sheared too fast to "
+           "have one" + remedy;
   return "";
 }
+
+namespace {
 
 // Final state and the largest dilatancy angle over any dilatancy_window of strain.
 void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
@@ -868,6 +874,17 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    (std::isnan(res.phi_cv_interior_deg) ? std::string("not measured")
                                                                         : fmt(res.phi_cv_interior_deg, 3) + " deg") +
                                    " in the interior)");
+  if (res.cv_rows_unloaded > 0)
+    res.outcome.warnings.push_back("sigma1 was 0 on " + std::to_string(res.cv_rows_unloaded) + " of the " +
+                                   std::to_string(res.cv_samples) +
+                                   " rows of the critical-state window: the top and bottom walls lost the sample "
+                                   "for a moment");
+  // Within two standard errors of zero: noise about a critical state with almost no strength.
+  if (res.phi_cv_deg < 0.0)
+    res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
+                                   " deg), within two standard errors of zero: the sample is too small or sheared too "
+                                   "fast to measure a critical state this weak (more triaxial.particles, a lower "
+                                   "strain_rate)");
   if (res.cv_rows_in_extension > 0)
     res.outcome.warnings.push_back("sigma1 fell below sigma3 on " + std::to_string(res.cv_rows_in_extension) + " of the " +
                                    std::to_string(res.cv_samples) +
@@ -886,15 +903,17 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
   const TriaxialConfig& cfg = rig.cfg;
   std::string s;
   if (rig.world.dt() != res.dt && res.dt_frictionless > 0.0)
-    s += " (that step is the frictionless stages' own, " + fmt(res.dt_frictionless / res.dt, 4) + " x dt = " +
+    s += " (that step is the frictionless stages' own, " + fmt(res.dt_frictionless / res.dt, 4) + " x dt, dt = " +
          fmt(res.dt) + " s: the same margin to their own critical step)";
   if (e.quantity() != "overlap") return s;
   // Overlap of a grain pair under a mean stress p: about p d / kn of a diameter.
   const double kappa = cfg.material.kn / (rig.target_p * cfg.material.d_min);
+  // The dense preparation's first stage, at its target (not ramping down from it).
+  const bool at_prep_load = cfg.prep_pressure_factor != 1.0 &&
+                            std::abs(rig.target_p - cfg.prep_pressure_factor * cfg.confining_pressure) <=
+                                1e-9 * rig.target_p;
   s += "; the stage loads the grains to " + fmt(rig.target_p) + " Pa" +
-       (rig.target_p > cfg.confining_pressure * 1.0000001 ? " (triaxial.prep_pressure_factor " +
-                                                                fmt(cfg.prep_pressure_factor) + " x p0)"
-                                                          : std::string()) +
+       (at_prep_load ? " (triaxial.prep_pressure_factor " + fmt(cfg.prep_pressure_factor) + " x p0)" : std::string()) +
        ", where kn / (p d_min) = " + fmt(kappa, 3);
   if (kappa < 1000.0)
     s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "

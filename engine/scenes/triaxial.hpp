@@ -182,6 +182,7 @@ struct TriaxialResult {
   // lateral one (sigma1 < sigma3: extension, no compression test's state).
   double cv_coordination = NAN;
   int cv_rows_in_extension = 0;
+  int cv_rows_unloaded = 0;  // rows where sigma1 = 0: the top and bottom walls lost the sample
   double q_peak = 0;                // [Pa]
   double porosity_initial = 0;      // after preparation (start of shear)
   double porosity_final = 0;
@@ -222,6 +223,13 @@ struct TriaxialResult {
 };
 
 TriaxialResult run_triaxial(const TriaxialConfig& config, Observer* observer = nullptr);
+
+// From a finished shear's series (columns eps1, z_all, sigma1, sigma2, sigma3) and
+// its angles: the critical-state window's coordination, rows in extension and rows
+// with sigma1 = 0 (judge_window), then why the run was no drained test (empty: it was
+// one). run_triaxial ends such a run invalid in stage shear.
+void judge_window(const TriaxialConfig& config, TriaxialResult& result);
+std::string why_invalid(const TriaxialConfig& config, TriaxialResult& result);
 
 // Whether the critical-state window's rows (eps1, eps_v, phi_mob in degrees) are at
 // critical state: sets res.cv_dilatancy_deg and res.cv_drift_deg / _se_deg (from 3

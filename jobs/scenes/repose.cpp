@@ -148,15 +148,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     // The preset's slab depth in metres, whatever the grading: in units of a smaller
     // mean diameter it would be thinner than the periodic images allow.
     double depth = pre.depth_diameters;
-    if (p.contains("size_distribution")) {
-      const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
-      const double d_mean = material_from(p).grading().mean();
-      depth *= 0.5 * (d0 + d1) / d_mean;
-      // A wide grading's largest grain may reach past the preset depth: the default
-      // is then the least a periodic slab allows (the engine's bound, rounded up).
-      const double least = 2.0 * (d1 + 0.1 * d0) / d_mean;
-      if (depth < least) depth = std::ceil(10.0 * least) / 10.0;
-    }
+    const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
+    const double d_mean = material_from(p).grading().mean();
+    if (p.contains("size_distribution")) depth *= 0.5 * (d0 + d1) / d_mean;
+    // A wide grading's largest grain may reach past the preset depth: the default is
+    // then the least a periodic slab allows (the engine's bound, rounded up).
+    const double least = 2.0 * (d1 + 0.1 * d0) / d_mean;
+    if (depth < least) depth = std::ceil(10.0 * least) / 10.0;
     p["depth_diameters"] = depth;
   }
   if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;

@@ -282,12 +282,12 @@ std::string advice(const nlohmann::json& p) {
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget"
        << std::setprecision(2);
   // Without friction no tangential force turns a grain, spins stay zero, and the
-  // rolling resistance never acts: tasks that differ only in eta run the same work
-  // (bit for bit) under different keys.
+  // rolling resistance never acts: tasks that differ only in eta run the same
+  // trajectory (bit for bit, at one step) under different keys.
   if (c.material.friction_angle == 0.0 && c.material.rolling_eta != 0.0)
     os << (os.tellp() > 0 ? "; " : "")
-       << "material.eta changes nothing at theta_deg 0: without friction no tangential force turns a grain, so "
-          "no rolling resistance acts (the task runs the work of eta 0)";
+       << "material.eta exerts no moment at theta_deg 0: without friction no tangential force turns a grain, so "
+          "the rolling resistance never acts (it only shortens the critical step through the rolling mode)";
   // Given, it changes the task's key and nothing a loose sample computes.
   if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
     os << (os.tellp() > 0 ? "; " : "")

@@ -79,35 +79,44 @@ std::vector<std::int64_t> point_tasks(const std::string& db, double th, double e
 TEST(CalibrateStore, APointShortOfReplicasAndANodeWithoutTasksAreSaid) {
   TempDir d;
   const std::string db = make_db(d, /*with_holes=*/false);
-  const auto lost = point_tasks(db, 40, 0.0), absent = point_tasks(db, 25, 0.2);
+  const auto lost = point_tasks(db, 40, 0.0), absent = point_tasks(db, 25, 0.2), invalid = point_tasks(db, 15, 0.5);
   ASSERT_EQ(lost.size(), 2u);
   ASSERT_EQ(absent.size(), 2u);
+  ASSERT_EQ(invalid.size(), 2u);
+  sql(db, "UPDATE tasks SET status = 'failed', error = 'invalid in stage shear: the lateral walls lost sigma3' WHERE id IN (" +
+              std::to_string(invalid[0]) + ", " + std::to_string(invalid[1]) + "); DELETE FROM metrics WHERE task_id IN (" +
+              std::to_string(invalid[0]) + ", " + std::to_string(invalid[1]) + ")");
   sql(db, "UPDATE tasks SET status = 'failed' WHERE id = " + std::to_string(lost[1]) +
               "; DELETE FROM metrics WHERE task_id = " + std::to_string(lost[1]) +
               "; DELETE FROM job_tasks WHERE task_id IN (" + std::to_string(absent[0]) + ", " + std::to_string(absent[1]) + ")");
   {
     db::Store s(db, true);
     const auto rs = calibrate::gather(s, "grid", "phi_peak");
-    EXPECT_EQ(rs.holes(), 1);
+    EXPECT_EQ(rs.holes(), 2);
     EXPECT_EQ(rs.partials(), 1);
     EXPECT_EQ(rs.partial_list(), "theta 40, eta 0: 1 of 2 (1 failed)");
     for (const auto& p : rs.points)
-      if (p.hole()) EXPECT_EQ(p.without_value(), "not in this database") << p.theta << " " << p.eta;
+      if (p.hole())
+        EXPECT_EQ(p.without_value(), p.theta == 15 ? "2 invalid (no test)" : "no task here: not in this database, or not selected")
+            << p.theta;
   }
   const double th = 28, et = 0.22;
   Result r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
                          "phi_cv=" + std::to_string(phi_cv_fn(th, et))},
                         d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.out.find("1 hole(s), 1 point(s) short of replicas"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("warning: 1 grid point(s) of job grid have a value from fewer replicas than they have tasks "
+  EXPECT_NE(r.out.find("2 hole(s), 1 point(s) short of replicas"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("warning: 1 point(s) of job grid have a value from fewer replicas than they have tasks "
                        "(theta 40, eta 0: 1 of 2 (1 failed))"),
             std::string::npos)
       << r.out;
   r = run_demcal({"map", "--metric", "phi_cv", "--out", "m.svg"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
-  EXPECT_NE(r.out.find("1 hole(s), 1 short of replicas"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("hole: theta = 25, eta = 0.2 (not in this database)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("2 hole(s), 1 short of replicas"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("hole: theta = 15, eta = 0.5 (2 invalid (no test))"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("hole: theta = 25, eta = 0.2 (no task here: not in this database, or not selected)"),
+            std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find("short of replicas: theta = 40, eta = 0 (the mean of 1; 1 failed)"), std::string::npos) << r.out;
   EXPECT_NE(slurp(d.file("m.svg")).find("short of replicas (failed or missing)"), std::string::npos);
   // A metric the tasks a filter selects do not store is no data there, not unknown.
@@ -174,7 +183,7 @@ TEST(CalibrateCli, AMapDrawsOnlyAFitMadeOnItsPins) {
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_EQ(r.out.find("drawn: 95%"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("no fit drawn: job g's 2 fit(s) were made on other --where pins than this map's "
-                       "(confining_kpa=100), another surface"),
+                       "(confining_kpa=100); a fit is drawn on the map of the pins it was made on"),
             std::string::npos)
       << r.out;
 }

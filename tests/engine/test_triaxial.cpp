@@ -338,6 +338,43 @@ TEST(TriaxialScene, AShearTheServoCannotFollowIsNoResult) {
   EXPECT_GT(r.shear_stress_error_mean, c.invalid_stress_error);
 }
 
+// The judgement on a synthetic window (rows at eps1 0.20 ... 0.30): each reason
+// alone, and what stays a result with a warning.
+TEST(TriaxialScene, EachWayARunIsNoTestIsJudgedOnItsWindow) {
+  TriaxialConfig c;
+  auto run = [&](double z, int unloaded, int extension, double phi_cv, double se, double stress_error) {
+    TriaxialResult r;
+    r.series.columns = {"eps1", "z_all", "sigma1", "sigma2", "sigma3"};
+    for (int k = 0; k <= 10; ++k) {
+      const double s1 = k < unloaded ? 0.0 : k < unloaded + extension ? 0.8e5 : 2e5;
+      r.series.rows.push_back({0.20 + 0.01 * k, z, s1, 1e5, 1e5});
+    }
+    r.series.rows.push_back({0.31, 0.0, 0.0, 1e5, 1e5});  // past the window: not read
+    r.cv_samples = 11;
+    r.phi_cv_deg = phi_cv;
+    r.phi_cv_se_deg = se;
+    r.shear_stress_error_mean = stress_error;
+    const std::string why = why_invalid(c, r);
+    return std::make_tuple(why, r.cv_coordination, r.cv_rows_unloaded, r.cv_rows_in_extension);
+  };
+  auto [why, z, unloaded, ext] = run(2.0, 0, 0, 20.0, 0.5, 0.01);
+  EXPECT_EQ(why, "");
+  EXPECT_DOUBLE_EQ(z, 2.0);
+  EXPECT_EQ(unloaded, 0);
+  EXPECT_EQ(ext, 0);
+  EXPECT_NE(std::get<0>(run(2.0, 0, 0, 20.0, 0.5, 0.6)).find("the lateral walls lost sigma3"), std::string::npos);
+  EXPECT_EQ(std::get<0>(run(2.0, 1, 0, 20.0, 0.5, 0.01)), "") << "one row is warned, not invalid";
+  std::tie(why, z, unloaded, ext) = run(2.0, 2, 1, 20.0, 0.5, 0.01);
+  EXPECT_NE(why.find("the top and bottom walls lost the sample: sigma1 was 0 on 2 of the 11 rows"), std::string::npos)
+      << why;
+  EXPECT_EQ(ext, 3);  // the unloaded rows are in extension too
+  std::tie(why, z, unloaded, ext) = run(0.2, 0, 0, 20.0, 0.5, 0.01);
+  EXPECT_NE(why.find("the sample lost its contact network: mean coordination number 0.2 "), std::string::npos) << why;
+  EXPECT_EQ(std::get<0>(run(0.3, 0, 0, 20.0, 0.5, 0.01)), "");
+  EXPECT_NE(std::get<0>(run(2.0, 0, 0, -3.0, 1.0, 0.01)).find("no shear strength: phi_cv is negative"), std::string::npos);
+  EXPECT_EQ(std::get<0>(run(2.0, 0, 0, -0.6, 2.9, 0.01)), "") << "within noise of zero: warned, a result";
+}
+
 TEST(TriaxialScene, WallAndLoveWeberStressesAgreeInEquilibrium) {
   const TriaxialResult& r = cached("lw");
   ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;

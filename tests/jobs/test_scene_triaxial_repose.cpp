@@ -513,7 +513,7 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   j = base;
   j["material"]["theta_deg"] = 0;
   j["grid"] = {{"eta", {0.0, 0.5}}};
-  EXPECT_NE(notes_of(j).find("task #1: material.eta changes nothing at theta_deg 0"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("task #1: material.eta exerts no moment at theta_deg 0"), std::string::npos) << notes_of(j);
   j = base;
   j["triaxial"]["dt_factor"] = 0.7;
   EXPECT_NE(notes_of(j).find("dt is 0.968 of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
