@@ -874,11 +874,12 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    (std::isnan(res.phi_cv_interior_deg) ? std::string("not measured")
                                                                         : fmt(res.phi_cv_interior_deg, 3) + " deg") +
                                    " in the interior)");
+  const auto window_rows = [&](int n) {
+    return std::to_string(n) + " of the " + std::to_string(res.cv_samples) + " rows of the critical-state window";
+  };
   if (res.cv_rows_unloaded > 0)
-    res.outcome.warnings.push_back("sigma1 was 0 on " + std::to_string(res.cv_rows_unloaded) + " of the " +
-                                   std::to_string(res.cv_samples) +
-                                   " rows of the critical-state window: the top and bottom walls lost the sample "
-                                   "for a moment");
+    res.outcome.warnings.push_back("sigma1 was 0 on " + window_rows(res.cv_rows_unloaded) +
+                                   ": the top and bottom walls lost the sample for a moment");
   // Within two standard errors of zero: noise about a critical state with almost no strength.
   if (res.phi_cv_deg < 0.0)
     res.outcome.warnings.push_back("phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
@@ -886,10 +887,9 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    "fast to measure a critical state this weak (more triaxial.particles, a lower "
                                    "strain_rate)");
   if (res.cv_rows_in_extension > 0)
-    res.outcome.warnings.push_back("sigma1 fell below sigma3 on " + std::to_string(res.cv_rows_in_extension) + " of the " +
-                                   std::to_string(res.cv_samples) +
-                                   " rows of the critical-state window (extension, where the test compresses): the "
-                                   "sample is too small or sheared too fast for a steady critical state there");
+    res.outcome.warnings.push_back("sigma1 fell below sigma3 on " + window_rows(res.cv_rows_in_extension) +
+                                   " (extension, where the test compresses): the sample is too small or sheared too "
+                                   "fast for a steady critical state there");
   if (res.shear_stress_error_mean > 5.0 * cfg.stress_tolerance)
     res.outcome.warnings.push_back("lateral walls held sigma3 only within " +
                                    fmt(100.0 * res.shear_stress_error_mean) + "% on average during shear");
