@@ -267,6 +267,16 @@ std::string advice(const nlohmann::json& p) {
        << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
           "that limit, and above about 0.8 of it the preparation may blow up or not settle (triaxial.dt_factor)"
        << std::setprecision(2);
+  // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
+  // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
+  // valid setting takes about 5,000.
+  const double shear_steps = c.shear_steps();
+  if (f.dt > 0.0 && shear_steps < 1000.0)
+    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "the shear is only " << shear_steps
+       << " steps (triaxial.strain_rate " << c.strain_rate << " /s at a step of " << f.dt
+       << " s): the lateral walls' servo cannot follow so fast a shear, and the run will likely end invalid; a "
+          "lower strain_rate"
+       << std::setprecision(2);
   // Random insertion leaves the box at solid fraction initial_solid_fraction (0.3);
   // packed it is about twice that, about 21% of strain on each axis, which the walls
   // close at prep_strain_rate at most. A budget shorter than that stops the first

@@ -499,7 +499,8 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   };
   const json base = triaxial_base();
   const std::string plain = notes_of(base);
-  for (const char* what : {"kn / (p d_min)", "the preparation's walls", "of the critical step of an isolated pair"})
+  for (const char* what :
+       {"kn / (p d_min)", "the preparation's walls", "of the critical step of an isolated pair", "the shear is only"})
     EXPECT_EQ(plain.find(what), std::string::npos) << plain;
   json j = base;
   j["triaxial"]["confining_kpa"] = 10000;  // a dense preparation at 1 GPa: kn / (p d_min) = 30
@@ -510,6 +511,10 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   j["material"]["diameter"] = {{"min", 1e-5}, {"max", 2e-5}};  // a 1000x finer step
   EXPECT_NE(notes_of(j).find("need about"), std::string::npos) << notes_of(j);
   EXPECT_NE(notes_of(j).find("more than triaxial.prep_step_budget (400000)"), std::string::npos) << notes_of(j);
+  j = base;
+  j["triaxial"]["strain_rate"] = 1.0;
+  j["triaxial"]["axial_strain"] = 0.05;
+  EXPECT_NE(notes_of(j).find("the shear is only "), std::string::npos) << notes_of(j);
   j = base;
   j["material"]["theta_deg"] = 0;
   j["grid"] = {{"eta", {0.0, 0.5}}};
