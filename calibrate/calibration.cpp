@@ -1,4 +1,5 @@
 #include "calibration.hpp"
+#include "excerpt.hpp"
 
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
@@ -320,10 +321,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     "peak strength; a target on phi_peak_smoothed_deg fits the peak of the running "
                                     "mean instead");
   for (const auto& [job, rs] : warned) {
-    // The first of the task's warnings (they are joined with "; "), cut at a word.
-    std::string w = rs->first_warning;
-    if (const auto semi = w.find("; "); semi != std::string::npos) w = w.substr(0, semi) + " (and more)";
-    if (w.size() > 240) w = w.substr(0, w.rfind(' ', 236)) + " ...";
+    const std::string w = cut_at_word(first_warning(rs->first_warning), 240);
     int used = 0;
     for (const auto& p : rs->points) used += static_cast<int>(p.values.size());
     cal.result.warnings.push_back(std::to_string(rs->warned) + " of the " + std::to_string(used) + " results used from job " +

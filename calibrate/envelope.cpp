@@ -1,4 +1,5 @@
 #include "envelope.hpp"
+#include "excerpt.hpp"
 
 #include "response_surface.hpp"
 #include "jobs/job_error.hpp"
@@ -88,9 +89,7 @@ std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& jo
     std::ostringstream why;
     why << s3 << " kPa: task " << r.task.id << " ";
     if (r.task.status != "done") {
-      std::string error = msg.error;
-      if (error.size() > 160) error = error.substr(0, error.rfind(' ', 156)) + " ...";
-      why << (r.task.status == "failed" ? "failed: " + error : "not finished (" + r.task.status + ")");
+      why << (r.task.status == "failed" ? "failed: " + cut_at_word(msg.error, 160) : "not finished (" + r.task.status + ")");
       pe.left_out.push_back(why.str());
       continue;
     }

@@ -4,6 +4,7 @@
 
 #include "calibrate/calibration.hpp"
 #include "calibrate/envelope.hpp"
+#include "calibrate/excerpt.hpp"
 #include "calibrate/map.hpp"
 #include "calibrate/metric.hpp"
 #include "db/store.hpp"
@@ -107,11 +108,9 @@ void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, c
     if (e.warned > 0 && warned == 0) first = e.first_warning;
     warned += e.warned;
   }
-  if (warned > 0) {
-    if (const auto semi = first.find("; "); semi != std::string::npos) first = first.substr(0, semi) + " (and more)";
-    std::cout << "warning: " << warned << " of the " << used << " peaks used carry warnings (" << hint << "), e.g.: " << first
-              << "\n";
-  }
+  if (warned > 0)
+    std::cout << "warning: " << warned << " of the " << used << " peaks used carry warnings (" << hint
+              << "), e.g.: " << calibrate::first_warning(first) << "\n";
   const auto mean = [](const std::vector<double>& v) {
     double s = 0;
     for (double x : v) s += x;

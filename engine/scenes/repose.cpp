@@ -180,6 +180,10 @@ double ReposeConfig::max_steps() const {
   return std::ceil((2.0 * settle_time_limit + time_limit + 3.0 * sample_interval) / step_forecast().dt);
 }
 
+double least_periodic_depth_diameters(const Material& m) {
+  return std::ceil(20.0 * interaction_reach(m) / m.grading().mean()) / 10.0;
+}
+
 void ReposeConfig::validate() const {
   material.validate();
   positive(column_width, "repose.column_width");
@@ -226,7 +230,7 @@ void ReposeConfig::validate() const {
   if (threads < 1) throw ConfigError("threads", "must be at least 1");
   const double d_mean = material.grading().mean();
   const double depth = slab_depth_diameters * d_mean;
-  const double reach = material.d_max + 0.1 * material.d_min;  // largest diameter plus the default skin
+  const double reach = interaction_reach(material);
   if (side_walls != SideWalls::periodic && depth < material.d_max) {
     std::ostringstream os;
     os << "slab depth " << depth << " m between side walls cannot hold the largest grain (" << material.d_max
@@ -237,7 +241,7 @@ void ReposeConfig::validate() const {
     std::ostringstream os;
     os << "slab depth " << depth << " m is below twice the interaction reach, 2 x " << reach
        << " m (the largest diameter plus the neighbour skin): periodic images would interact; use at least "
-       << std::ceil(20.0 * reach / d_mean) / 10.0 << " (mean diameters of " << d_mean << " m)";
+       << least_periodic_depth_diameters(material) << " (mean diameters of " << d_mean << " m)";
     throw ConfigError("repose.slab_depth_diameters", os.str());
   }
   if (column_width < 2.0 * material.d_max)
@@ -672,8 +676,12 @@ void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapRe
     if (heap.mobile[i] && p.x[i][0] + p.r[i] > z.L - 0.5 * cfg.material.d_min) res.reached_end_wall = true;
   if (res.reached_end_wall) res.outcome.warnings.push_back("grains reached the end wall: runout is bounded by domain_length");
   if (!fit.ok) {
+    // A heap at rest with no slope to fit (a profile of one or two bins) has no angle:
+    // no result, as a triaxial that was no test has none.
     res.repose_deg = NAN;
-    res.outcome.warnings.push_back("no angle of repose: " + fit.why);
+    res.outcome.status = SceneStatus::invalid;
+    res.outcome.failed_stage = "measure";
+    res.outcome.message = "no angle of repose: " + fit.why + " (a larger column, or a narrower repose.bin_width)";
     return;
   }
   res.repose_deg = fit.angle_deg;
@@ -844,20 +852,6 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     res.outcome.message = e.what();
   }
   res.steps = run.steps_total;
-  // A heap that came to rest with no slope to fit (a profile of one or two bins) has
-  // no angle: no result, as a triaxial that was no test has none.
-  if (res.outcome.ok() && std::isnan(res.repose_deg)) {
-    const auto it = std::find_if(res.outcome.warnings.begin(), res.outcome.warnings.end(),
-                                 [](const std::string& w) { return w.rfind("no angle of repose: ", 0) == 0; });
-    res.outcome.status = SceneStatus::invalid;
-    res.outcome.failed_stage = "measure";
-    if (it != res.outcome.warnings.end()) {
-      res.outcome.message = *it + " (a larger column, or a narrower repose.bin_width)";
-      res.outcome.warnings.erase(it);
-    } else {
-      res.outcome.message = "no angle of repose was measured";
-    }
-  }
   for (const auto& wmsg : res.outcome.warnings) {
     if (!res.outcome.message.empty()) res.outcome.message += "; ";
     res.outcome.message += wmsg;

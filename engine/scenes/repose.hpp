@@ -51,6 +51,12 @@ bool parse_side_walls(const std::string& name, SideWalls& s);
 // particle caps, a bound on typos, far above any column one machine settles.
 constexpr double kMaxReposeGrains = 5e6;
 
+// How far a grain's interactions reach: the largest diameter plus the default skin.
+// A periodic slab thinner than twice it lets a grain meet its own image.
+inline double interaction_reach(const Material& m) { return m.d_max + 0.1 * m.d_min; }
+// The thinnest periodic slab, in mean diameters, rounded up to a tenth.
+double least_periodic_depth_diameters(const Material& m);
+
 struct ReposeConfig {
   Material material = repose_seed_material();
 

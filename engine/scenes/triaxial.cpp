@@ -743,7 +743,7 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
       res.q_peak = r[c_q];
     }
     best_in = std::max(best_in, x_in);
-    if (r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9) {
+    if (cfg.in_cv_window(r[c_e1])) {
       cv.push_back(x);
       cv_in += x_in;
       cv_e1.push_back(r[c_e1]);
@@ -783,7 +783,7 @@ void judge_window(const TriaxialConfig& cfg, TriaxialResult& res) {
   int n = 0;
   res.cv_rows_in_extension = res.cv_rows_unloaded = 0;
   for (const auto& r : s.rows) {
-    if (!(r[c_e1] >= cfg.cv_from - 1e-9 && r[c_e1] <= cfg.cv_to + 1e-9)) continue;
+    if (!cfg.in_cv_window(r[c_e1])) continue;
     z += r[c_z];
     ++n;
     res.cv_rows_unloaded += r[c_s1] <= 0.0;
@@ -801,9 +801,8 @@ void judge_window(const TriaxialConfig& cfg, TriaxialResult& res) {
 // confining one there on average beyond its noise (phi_cv + 2 se < 0: no critical
 // state does that, frictionless grains included; within the noise, as 50 frictionless
 // grains at aspect ratio 4 read -0.6 +- 2.9 deg, it is warned).
-std::string why_invalid(const TriaxialConfig& cfg, TriaxialResult& res) {
+std::string why_invalid(const TriaxialConfig& cfg, const TriaxialResult& res) {
   const std::string remedy = " (a lower triaxial.strain_rate or triaxial.scaled_density, more triaxial.particles)";
-  judge_window(cfg, res);
   if (res.shear_stress_error_mean > cfg.invalid_stress_error)
     return "the lateral walls lost sigma3: it strayed from p0 by " + fmt(100.0 * res.shear_stress_error_mean) +
            "% on average during shear (limit " + fmt(100.0 * cfg.invalid_stress_error) +
@@ -973,6 +972,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
 
   angles_from_series(cfg, res);
   volume_change_from_series(cfg, res);
+  judge_window(cfg, res);
   if (const std::string why = why_invalid(cfg, res); !why.empty()) {
     res.outcome.status = SceneStatus::invalid;
     res.outcome.failed_stage = "shear";

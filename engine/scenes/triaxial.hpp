@@ -102,6 +102,8 @@ struct TriaxialConfig {
   double sample_strain = 0.001;              // series row every this much eps1
   long sample_steps = 0;                     // > 0: a row every this many shear steps instead
   double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
+  // Whether a row at axial strain e1 is in that window (its edges with a round-off margin).
+  bool in_cv_window(double e1) const { return e1 >= cv_from - 1e-9 && e1 <= cv_to + 1e-9; }
   double quasi_static_inertial = 1e-3;       // warn above this inertial number
   // Beyond these the run is no drained triaxial test and ends invalid: the lateral
   // walls' mean stress error in shear (0.5: sigma3 half off p0 on average), and the
@@ -224,12 +226,12 @@ struct TriaxialResult {
 
 TriaxialResult run_triaxial(const TriaxialConfig& config, Observer* observer = nullptr);
 
-// From a finished shear's series (columns eps1, z_all, sigma1, sigma2, sigma3) and
-// its angles: the critical-state window's coordination, rows in extension and rows
-// with sigma1 = 0 (judge_window), then why the run was no drained test (empty: it was
-// one). run_triaxial ends such a run invalid in stage shear.
+// From a finished shear's series (columns eps1, z_all, sigma1, sigma2, sigma3): the
+// critical-state window's coordination, rows in extension and rows with sigma1 = 0.
 void judge_window(const TriaxialConfig& config, TriaxialResult& result);
-std::string why_invalid(const TriaxialConfig& config, TriaxialResult& result);
+// From those and the angles: why the run was no drained test (empty: it was one).
+// run_triaxial ends such a run invalid in stage shear.
+std::string why_invalid(const TriaxialConfig& config, const TriaxialResult& result);
 
 // Whether the critical-state window's rows (eps1, eps_v, phi_mob in degrees) are at
 // critical state: sets res.cv_dilatancy_deg and res.cv_drift_deg / _se_deg (from 3

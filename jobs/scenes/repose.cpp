@@ -147,14 +147,13 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   if (!p.contains("depth_diameters")) {
     // The preset's slab depth in metres, whatever the grading: in units of a smaller
     // mean diameter it would be thinner than the periodic images allow.
+    const engine::Material m = material_from(p);
+    const double d_mean = m.grading().mean();
     double depth = pre.depth_diameters;
-    const double d0 = p["d_min"].get<double>(), d1 = p["d_max"].get<double>();
-    const double d_mean = material_from(p).grading().mean();
-    if (p.contains("size_distribution")) depth *= 0.5 * (d0 + d1) / d_mean;
+    if (p.contains("size_distribution")) depth *= 0.5 * (m.d_min + m.d_max) / d_mean;
     // A wide grading's largest grain may reach past the preset depth: the default is
-    // then the least a periodic slab allows (the engine's bound, rounded up).
-    const double least = 2.0 * (d1 + 0.1 * d0) / d_mean;
-    if (depth < least) depth = std::ceil(10.0 * least) / 10.0;
+    // then the least a periodic slab allows (the engine's check, ReposeConfig::validate).
+    if (depth * d_mean < 2.0 * engine::interaction_reach(m)) depth = engine::least_periodic_depth_diameters(m);
     p["depth_diameters"] = depth;
   }
   if (!p.contains("stiffness_scale")) p["stiffness_scale"] = pre.stiffness_scale;

@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <iomanip>
 #include <sstream>
 
 namespace demcal::jobs {
@@ -236,13 +235,20 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
 
 // The quasi-static check, forecast: at the start of shear the mean stress is p0, so
 // a nominal inertial number above the limit is a warning every such task will carry.
+// Starts the next of advice()'s notes (they are joined with "; "), written at the
+// significant digits it needs.
+std::ostream& next_note(std::ostringstream& os, int precision) {
+  if (os.tellp() > 0) os << "; ";
+  os.precision(precision);
+  return os;
+}
+
 std::string advice(const nlohmann::json& p) {
   const engine::TriaxialConfig c = config_from(p);
   std::ostringstream os;
-  os.precision(2);
   const double i0 = c.nominal_inertial_number();
   if (i0 > c.quasi_static_inertial)
-    os << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
+    next_note(os, 2) << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
        << c.quasi_static_inertial << ": the run will warn not quasi-static";
   // The highest mean stress of the preparation against the stiffness: below about
   // 1000 grains press deep into each other under the load alone (a 10 MPa test's dense
@@ -250,33 +256,30 @@ std::string advice(const nlohmann::json& p) {
   const double p_max = c.confining_pressure * (c.packing == engine::Packing::dense ? c.prep_pressure_factor : 1.0);
   const double kappa = c.material.kn / (p_max * c.material.d_min);
   if (kappa < 1000.0)
-    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "kn / (p d_min) is " << kappa << " at "
+    next_note(os, 3) << "kn / (p d_min) is " << kappa << " at "
        << p_max << " Pa, the preparation's highest mean stress"
        << (c.packing == engine::Packing::dense ? " (triaxial.prep_pressure_factor x p0)" : "")
        << ": grains will press deep into each other, and the run may stop on an overlap past the limit whatever "
           "the step (the seed's material: 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
-          "confining_kpa, or raise material.kn"
-       << std::setprecision(2);
+          "confining_kpa, or raise material.kn";
   // The critical step is an isolated pair's; a packed grain's several contacts lower
   // the limit, and the dense preparation's frictionless stages step at the same
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
   // 0.83 did not settle.
   const engine::StepForecast f = c.step_forecast();
   if (!f.exceeds() && f.dt > 0.8 * f.dt_critical)
-    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "dt is " << f.dt / f.dt_critical
+    next_note(os, 3) << "dt is " << f.dt / f.dt_critical
        << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
-          "that limit, and above about 0.8 of it the preparation may blow up or not settle (triaxial.dt_factor)"
-       << std::setprecision(2);
+          "that limit, and above about 0.8 of it the preparation may blow up or not settle (triaxial.dt_factor)";
   // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
   // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
   // valid setting takes about 5,000.
   const double shear_steps = c.shear_steps();
   if (f.dt > 0.0 && shear_steps < 1000.0)
-    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "the shear is only " << shear_steps
+    next_note(os, 3) << "the shear is only " << shear_steps
        << " steps (triaxial.strain_rate " << c.strain_rate << " /s at a step of " << f.dt
        << " s): the lateral walls' servo cannot follow so fast a shear, and the run will likely end invalid; a "
-          "lower strain_rate"
-       << std::setprecision(2);
+          "lower strain_rate";
   // Random insertion leaves the box at solid fraction initial_solid_fraction (0.3);
   // packed it is about twice that, about 21% of strain on each axis, which the walls
   // close at prep_strain_rate at most. A budget shorter than that stops the first
@@ -286,26 +289,23 @@ std::string advice(const nlohmann::json& p) {
   const double step = f.dt * (c.packing == engine::Packing::dense ? 2.0 : 1.0);
   const double steps_to_close = close / (c.prep_strain_rate * step);
   if (step > 0.0 && steps_to_close > static_cast<double>(c.prep_step_budget))
-    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(3) << "the preparation's walls, at triaxial.prep_strain_rate "
+    next_note(os, 3) << "the preparation's walls, at triaxial.prep_strain_rate "
        << c.prep_strain_rate << " /s and a step of " << step << " s, need about " << steps_to_close
        << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
-       << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget"
-       << std::setprecision(2);
+       << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget";
   // Without friction no tangential force turns a grain, spins stay zero, and the
   // rolling resistance never acts: tasks that differ only in eta run the same
   // trajectory (bit for bit, at one step) under different keys.
   if (c.material.friction_angle == 0.0 && c.material.rolling_eta != 0.0)
-    os << (os.tellp() > 0 ? "; " : "")
-       << "material.eta exerts no moment at theta_deg 0: without friction no tangential force turns a grain, so "
+    next_note(os, 2) << "material.eta exerts no moment at theta_deg 0: without friction no tangential force turns a grain, so "
           "the rolling resistance never acts (it only shortens the critical step through the rolling mode)";
   // Given, it changes the task's key and nothing a loose sample computes.
   if (c.packing == engine::Packing::loose && p.contains("frictionless_dt_scale"))
-    os << (os.tellp() > 0 ? "; " : "")
-       << "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
+    next_note(os, 2) << "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
   // The grains then weigh scaled_density whatever the sand's density; tasks that
   // differ only in it run the same work under different keys.
   if (c.density_scale <= 0.0 && c.material.density != engine::Material{}.density)
-    os << (os.tellp() > 0 ? "; " : "") << std::setprecision(6) << "material.density (" << c.material.density
+    next_note(os, 6) << "material.density (" << c.material.density
        << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
        << " kg/m^3); triaxial.density_scale scales material.density instead";
   return os.str();

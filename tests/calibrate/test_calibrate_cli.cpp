@@ -34,6 +34,14 @@ std::string make_db(const TempDir& d, bool with_holes = true) {
   return path;
 }
 
+// `demcal fit` with `extra` options and the synthetic angles at (th, et) as targets.
+std::vector<std::string> fit_at(double th, double et, std::vector<std::string> extra = {}) {
+  extra.insert(extra.begin(), "fit");
+  extra.insert(extra.end(), {"--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
+                             "phi_cv=" + std::to_string(phi_cv_fn(th, et))});
+  return extra;
+}
+
 TEST(CalibrateStore, GatherAveragesReplicasAndKeepsHoles) {
   TempDir d;
   db::Store s(make_db(d));
@@ -100,10 +108,7 @@ TEST(CalibrateStore, APointShortOfReplicasAndANodeWithoutTasksAreSaid) {
         EXPECT_EQ(p.without_value(), p.theta == 15 ? "2 invalid (no test)" : "no task here: not in this database, or not selected")
             << p.theta;
   }
-  const double th = 28, et = 0.22;
-  Result r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
-                         "phi_cv=" + std::to_string(phi_cv_fn(th, et))},
-                        d.path.string());
+  Result r = run_demcal(fit_at(28, 0.22), d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("2 hole(s), 1 point(s) short of replicas"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("warning: 1 point(s) of job grid have a value from fewer replicas than they have tasks "
@@ -156,12 +161,8 @@ TEST(CalibrateCli, AMapDrawsOnlyAFitMadeOnItsPins) {
       s.finish(t.id, "test", o);
     }
   }
-  const std::vector<std::string> targets = {"--target", "phi_peak=" + std::to_string(phi_peak_fn(28, 0.22)), "--target",
-                                            "phi_cv=" + std::to_string(phi_cv_fn(28, 0.22))};
   auto fit = [&](const std::string& pin) {
-    std::vector<std::string> args = {"fit", "--where", pin};
-    args.insert(args.end(), targets.begin(), targets.end());
-    const Result r = run_demcal(args, d.path.string());
+    const Result r = run_demcal(fit_at(28, 0.22, {"--where", pin}), d.path.string());
     EXPECT_EQ(r.rc, 0) << r.err;
   };
   fit("confining_kpa=200");  // fit 1
@@ -400,9 +401,7 @@ TEST(CalibrateCli, FitCountsTheReplicaCorrelationOfOneJobsMetrics) {
 TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
   TempDir d;
   const std::string db = make_db(d, /*with_holes=*/false);
-  const double th = 28, et = 0.22;
-  const std::vector<std::string> args = {"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)),
-                                         "--target", "phi_cv=" + std::to_string(phi_cv_fn(th, et))};
+  const std::vector<std::string> args = fit_at(28, 0.22);
   auto r = run_demcal(args, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.out << r.err;
   EXPECT_EQ((r.out + r.err).find("carry warnings"), std::string::npos) << "clean results, no such warning";
@@ -534,9 +533,7 @@ TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
     store_fake_job(s, "grid", kTh, kEt, 2, 0.3, 7, failed);
   }
   const double th = 26, et = 0.27;  // near the failed point (25, 0.3)
-  auto r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(th, et)), "--target",
-                       "phi_cv=" + std::to_string(phi_cv_fn(th, et))},
-                      d.path.string());
+  auto r = run_demcal(fit_at(th, et), d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("box: theta 15 .. 35 deg"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("warning: job grid has no phi_peak above theta 35"), std::string::npos) << r.out;
@@ -544,9 +541,7 @@ TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
   EXPECT_NE(r.out.find("phi_peak and phi_cv have no value at a corner"), std::string::npos) << r.out;
   // A region that reaches the cut box's edge (theta 35) stands on no cell beyond it:
   // the failed theta 40 row is no corner of the cells it lies on.
-  r = run_demcal({"fit", "--target", "phi_peak=" + std::to_string(phi_peak_fn(34.5, 0.1)), "--target",
-                  "phi_cv=" + std::to_string(phi_cv_fn(34.5, 0.1))},
-                 d.path.string());
+  r = run_demcal(fit_at(34.5, 0.1), d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.out.find("theta 35"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("theta 40, eta"), std::string::npos) << r.out;
@@ -776,13 +771,10 @@ TEST(CalibrateCli, JobsNamedForAFitEachGiveTheirOwnMetrics) {
     store_fake_job(s, "dead", kTh, kEt, 1, 0.0, 3, all);
   }
   const std::string dir = d.path.string();
-  const std::vector<std::string> targets = {"--target", "phi_peak=" + std::to_string(phi_peak_fn(26, 0.2)), "--target",
-                                            "phi_cv=" + std::to_string(phi_cv_fn(26, 0.2))};
   auto with = [&](std::vector<std::string> jobs) {
-    std::vector<std::string> args = {"fit"};
-    args.insert(args.end(), targets.begin(), targets.end());
-    for (const auto& j : jobs) args.insert(args.end(), {"--job", j});
-    return run_demcal(args, dir);
+    std::vector<std::string> named;
+    for (const auto& j : jobs) named.insert(named.end(), {"--job", j});
+    return run_demcal(fit_at(26, 0.2, named), dir);
   };
   // Both named jobs store phi_peak: the advice is to name one of them, not "use --job".
   auto r = with({"g1", "g2"});

@@ -354,6 +354,7 @@ TEST(TriaxialScene, EachWayARunIsNoTestIsJudgedOnItsWindow) {
     r.phi_cv_deg = phi_cv;
     r.phi_cv_se_deg = se;
     r.shear_stress_error_mean = stress_error;
+    judge_window(c, r);
     const std::string why = why_invalid(c, r);
     return std::make_tuple(why, r.cv_coordination, r.cv_rows_unloaded, r.cv_rows_in_extension);
   };
