@@ -60,9 +60,11 @@ CREATE TABLE fits(
   result_json TEXT NOT NULL);
 )sql",
     // 1 -> 2: runners' heartbeats, so that a run on another host can tell a runner
-    // that died there (its tasks left 'running') from one still at work.
+    // that died there (its tasks left 'running') from one still at work. IF NOT
+    // EXISTS: a version-1 file that has the table (a version number set back by
+    // hand, or a migration whose version write was lost) migrates all the same.
     R"sql(
-CREATE TABLE runners(
+CREATE TABLE IF NOT EXISTS runners(
   token TEXT PRIMARY KEY,
   last_seen REAL NOT NULL);
 )sql",

@@ -285,6 +285,13 @@ std::optional<double> Store::last_seen(const std::string& worker) {
   return s.real(0);
 }
 
+std::vector<std::string> Store::runner_tokens() {
+  Statement s = conn_.prepare("SELECT token FROM runners ORDER BY token");
+  std::vector<std::string> out;
+  while (s.step()) out.push_back(s.text(0));
+  return out;
+}
+
 std::vector<std::pair<std::string, int>> Store::running_holders(const std::string& job) {
   Statement s = conn_.prepare(
       "SELECT t.worker, count(*) FROM job_tasks jt JOIN jobs j ON j.id = jt.job_id JOIN tasks t ON t.id = jt.task_id"

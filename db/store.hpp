@@ -87,6 +87,8 @@ class Store {
   // beat (unix seconds), nullopt if it never did.
   void beat(const std::string& worker);
   std::optional<double> last_seen(const std::string& worker);
+  // Every runner that ever beat into this database.
+  std::vector<std::string> runner_tokens();
   // Workers holding running tasks of `job`, with how many each.
   std::vector<std::pair<std::string, int>> running_holders(const std::string& job);
 

@@ -59,6 +59,20 @@ nlohmann::json parse_checking_duplicates(const std::string& text) {
   return j;
 }
 
+// "LINE:COL" (from 1) of byte `at` of `text`.
+std::string line_col(const std::string& text, std::size_t at) {
+  std::size_t line = 1, col = 1;
+  for (std::size_t i = 0; i < at && i < text.size(); ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      col = 1;
+    } else {
+      ++col;
+    }
+  }
+  return std::to_string(line) + ":" + std::to_string(col);
+}
+
 nlohmann::json parse_text(const std::string& text, const std::string& source) {
   try {
     return parse_checking_duplicates(text);
@@ -67,22 +81,20 @@ nlohmann::json parse_text(const std::string& text, const std::string& source) {
                            " levels deep (a job file needs four)");
   } catch (const nlohmann::json::parse_error& e) {
     // nlohmann reports a byte offset; people want line and column.
-    std::size_t line = 1, col = 1;
-    for (std::size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-      if (text[i] == '\n') {
-        ++line;
-        col = 1;
-      } else {
-        ++col;
-      }
-    }
     std::string what = e.what();
     const auto cut = what.find("parse error");
     if (cut != std::string::npos) what = what.substr(cut);
-    throw JobError("", source + ":" + std::to_string(line) + ":" + std::to_string(col) + ": malformed JSON: " + what);
+    throw JobError("", source + ":" + line_col(text, e.byte > 0 ? e.byte - 1 : 0) + ": malformed JSON: " + what);
   } catch (const nlohmann::json::exception& e) {
-    // e.g. a number too large for a double (1e999): not finite, so not accepted.
-    throw JobError("", source + ": malformed JSON: " + e.what() + " (numbers must be finite)");
+    // e.g. a number too large for a double (1e999): not finite, so not accepted. The
+    // parser gives no offset: the number it quotes is found in the text.
+    std::string what = e.what();
+    if (what.rfind("[json.exception.", 0) == 0 && what.find("] ") != std::string::npos)
+      what = what.substr(what.find("] ") + 2);
+    const auto a = what.find('\''), b = a == std::string::npos ? a : what.find('\'', a + 1);
+    const std::size_t at = b == std::string::npos ? std::string::npos : text.find(what.substr(a + 1, b - a - 1));
+    throw JobError("", source + (at == std::string::npos ? "" : ":" + line_col(text, at)) + ": malformed JSON: " + what +
+                           " (numbers must be finite)");
   }
 }
 

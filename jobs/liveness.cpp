@@ -84,6 +84,12 @@ bool process_alive(const Token& t) {
 
 }  // namespace
 
+bool process_alive_here(long pid) {
+  char state = 0;
+  std::string start;
+  return proc_stat(pid, state, start) && state != 'Z' && state != 'X';
+}
+
 std::string runner_token() {
   char state = 0;
   std::string start;

@@ -47,6 +47,7 @@ class BeatWatch {
 };
 
 std::string runner_token();  // this process
+bool process_alive_here(long pid);  // a process of this host's pid namespace, not a zombie
 std::string hostname();      // this machine's name, for tokens, part files and lock files
 // Alive as far as this process can tell: a runner on this host by its process (gone,
 // a zombie, or a recycled pid: dead); one on another host by its heartbeat in `store`

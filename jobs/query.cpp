@@ -60,20 +60,22 @@ nlohmann::json where_value(const ResultRow& r, const std::string& key) {
   return v.is_null() ? param_value(r, key) : v;
 }
 
-// Tables round to 6 digits for reading; CSV keeps every digit for further work.
-std::string num(double v, bool precise = false) {
+// Tables round metrics to 6 digits for reading, and parameters to 12 (the digits a
+// job file may tell two grid values apart by, validate's duplicate check); CSV keeps
+// every digit for further work.
+std::string num(double v, bool precise = false, int digits = 6) {
   if (std::isnan(v)) return "";
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
   if (precise) return nlohmann::json(v).dump();
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
   return buf;
 }
 
-std::string cell(const nlohmann::json& v, bool precise) {
+std::string param_cell(const nlohmann::json& v, bool precise) {
   if (v.is_null()) return "";
   if (v.is_string()) return v.get<std::string>();
-  if (v.is_number_float()) return num(v.get<double>(), precise);
+  if (v.is_number_float()) return num(v.get<double>(), precise, 12);
   return v.dump();
 }
 
@@ -115,6 +117,8 @@ void tag_messages(Table& t, const std::vector<ResultRow>& rows, std::size_t colu
     // its runner gone): a note, not the task's failure.
     const char* kind = !m.error.empty() ? (rows[i].task.status == "failed" ? "error" : "note") : "warning";
     t.rows[i][column] = "[" + std::to_string(k + 1) + "] " + kind;
+    if (rows[i].task.index < 0)  // its warning does not hide that no job holds it
+      t.rows[i][column] += ", [" + std::to_string(groups.add(kNoJobHoldsIt, rows[i].task.id) + 1) + "] note";
   }
   for (std::size_t k = 0; k < groups.texts.size(); ++k) {
     std::string text = groups.texts[k];
@@ -144,19 +148,16 @@ void tag_structured(Table& t, const std::vector<ResultRow>& rows, const std::vec
   }
 }
 
-// The parameters of the rows, in the order first seen; only those taking more than
-// one value (absent is a value) when varying_only. Each row's keys are walked beside
+// The parameters of the rows (each row's params_with_implied), in the order first
+// seen; only those taking more than one value (absent is a value) when varying_only. Each row's keys are walked beside
 // the first row's, both in key order: one pass, no lookup per key and row.
-std::vector<std::string> param_columns(const std::vector<ResultRow>& rows, bool varying_only) {
-  static const nlohmann::json none = nlohmann::json::object();
-  const auto object = [](const nlohmann::json& p) -> const nlohmann::json& { return p.is_object() ? p : none; };
+std::vector<std::string> param_columns(const std::vector<nlohmann::json>& rows, bool varying_only) {
   if (rows.empty()) return {};
-  const nlohmann::json& base = object(rows.front().params);
+  const nlohmann::json& base = rows.front();
   std::vector<std::string> keys;
   for (auto it = base.begin(); it != base.end(); ++it) keys.push_back(it.key());
   std::set<std::string> varying;
-  for (const auto& r : rows) {
-    const nlohmann::json& p = object(r.params);
+  for (const auto& p : rows) {
     auto a = base.begin(), b = p.begin();
     while (a != base.end() || b != p.end()) {
       if (b == p.end() || (a != base.end() && a.key() < b.key())) {
@@ -239,7 +240,10 @@ double metric_of(const ResultRow& r, const std::string& name) {
 Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& metrics, bool for_reading) {
   const bool varying_only = for_reading, precise = !for_reading;
   Table t;
-  const auto params = param_columns(rows, varying_only);
+  std::vector<nlohmann::json> ran_with;  // a scene's defaults are columns as stored values are
+  ran_with.reserve(rows.size());
+  for (const auto& r : rows) ran_with.push_back(params_with_implied(r));
+  const auto params = param_columns(ran_with, varying_only);
   const auto mets = metric_columns(rows, metrics);
   t.header = {"task", "job", "status"};
   t.header.insert(t.header.end(), params.begin(), params.end());
@@ -247,8 +251,11 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
   // header, "metric.NAME": CSV readers key columns by header.
   // A table for reading has one message column (tags, the texts below it); CSV has
   // an error and a warning column, so that a script can tell them apart.
-  const std::vector<std::string> message_columns =
+  // A task no job holds any more says so in a `note` column, present only then.
+  const bool orphans = std::any_of(rows.begin(), rows.end(), [](const ResultRow& r) { return r.task.index < 0; });
+  std::vector<std::string> message_columns =
       for_reading ? std::vector<std::string>{"message"} : std::vector<std::string>{"error", "warning"};
+  if (!for_reading && orphans) message_columns.push_back("note");
   for (const auto& m : mets) {
     const bool taken = std::find(t.header.begin(), t.header.end(), m) != t.header.end() ||
                        std::find(message_columns.begin(), message_columns.end(), m) != message_columns.end();
@@ -259,7 +266,7 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
     std::vector<std::string> line = {std::to_string(r.task.id), r.task.job, r.task.status};
     for (const auto& p : params) {
       const nlohmann::json v = param_value(r, p);
-      line.push_back(v.is_null() ? "" : cell(v, precise));
+      line.push_back(param_cell(v, precise));
     }
     for (const auto& m : mets) line.push_back(num(metric_of(r, m), precise));
     if (for_reading) {
@@ -268,6 +275,7 @@ Table build(const std::vector<ResultRow>& rows, const std::vector<std::string>& 
       const db::TaskMessage msg = db::task_message(r.task);
       line.push_back(msg.error);
       line.push_back(msg.warning);
+      if (orphans) line.push_back(r.task.index < 0 ? kNoJobHoldsIt : "");
     }
     t.rows.push_back(std::move(line));
   }
@@ -434,7 +442,7 @@ std::string why_none_match(const std::vector<ResultRow>& all, const std::vector<
       const nlohmann::json v = where_value(r, w.key);
       if (v.is_null()) continue;
       any = any || value_matches(v, w.value);
-      const std::string text = cell(v, false);
+      const std::string text = param_cell(v, false);
       if (std::find(values.begin(), values.end(), text) == values.end()) values.push_back(text);
     }
     if (any) continue;

@@ -2,6 +2,7 @@
 #include "job_error.hpp"
 
 #include "child_process.hpp"
+#include "leftover_files.hpp"
 #include "liveness.hpp"
 #include "physics_version.hpp"
 #include "stop_signal.hpp"
@@ -127,6 +128,8 @@ void Runner::prepare() {
   if (opt_.requeue_running) requeue_running_tasks(store_, job_id, *opt_.log);
   if (int n = requeue_dead_runners(store_, &beats_))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
+  if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
+    *opt_.log << "removed " << n << " partial file(s) left in " << dir_.string() << "/ by runners that are gone\n";
   if (opt_.retry_failed)
     if (int n = store_.reset_failed(job_id)) *opt_.log << "retrying " << n << " failed task(s)\n";
   refill_queue();

@@ -4,6 +4,7 @@
 
 #include "engine/types.hpp"
 
+#include <cmath>
 #include <algorithm>
 #include <sstream>
 
@@ -48,6 +49,14 @@ std::string unknown_key_reason(const std::string& key, const std::vector<std::st
   return reason + " (expected one of " + all + ")";
 }
 
+// Two numbers that differ past the 12th significant digit are one value written
+// twice for every reader of the results (query --where compares them so).
+bool numbers_nearly_equal(const nlohmann::json& a, const nlohmann::json& b) {
+  if (!a.is_number() || !b.is_number()) return false;
+  const double x = a.get<double>(), y = b.get<double>();
+  return std::isfinite(x) && std::isfinite(y) && std::abs(x - y) <= 1e-12 * std::max(std::abs(x), std::abs(y));
+}
+
 std::vector<nlohmann::json> check_list(const ParamSpec& spec, const nlohmann::json& list, const std::string& path) {
   if (list.empty()) throw JobError(path, "empty list: give at least one value");
   std::vector<nlohmann::json> values;
@@ -55,8 +64,12 @@ std::vector<nlohmann::json> check_list(const ParamSpec& spec, const nlohmann::js
     const std::string at = path + "[" + std::to_string(i) + "]";
     if (list[i].is_array()) throw JobError(at, "nested lists are not allowed");
     nlohmann::json v = check_scalar(spec, list[i], at);
-    for (std::size_t j = 0; j < values.size(); ++j)
+    for (std::size_t j = 0; j < values.size(); ++j) {
       if (values[j] == v) throw JobError(at, "duplicate value " + v.dump() + " (also at [" + std::to_string(j) + "])");
+      if (numbers_nearly_equal(values[j], v))
+        throw JobError(at, "duplicate value " + v.dump() + ": " + values[j].dump() + " at [" + std::to_string(j) +
+                               "] is the same to 12 significant digits (query --where takes them as one)");
+    }
     values.push_back(std::move(v));
   }
   return values;

@@ -164,8 +164,17 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
     throw JobError("triaxial.cv_from", "must be below triaxial.cv_to (" + num(p["cv_to"]) + "), got " + num(p["cv_from"]));
   if (p["sample_strain"].get<double>() > eps1)
     throw JobError("triaxial.sample_strain", "must not exceed triaxial.axial_strain (" + num(p["axial_strain"]) + ")");
+  // Named by both keys: a job that never wrote shear_ramp_strain hits this through a
+  // short axial_strain, against the default ramp.
   if (p["shear_ramp_strain"].get<double>() >= 0.5 * eps1)
-    throw JobError("triaxial.shear_ramp_strain", "must be below half of triaxial.axial_strain (" + num(p["axial_strain"]) + ")");
+    throw JobError("triaxial.shear_ramp_strain", num(p["shear_ramp_strain"]) +
+                                                     (p["shear_ramp_strain"] == engine::TriaxialConfig{}.shear_ramp_strain
+                                                          ? " (its default)"
+                                                          : "") +
+                                                     " must be below half of triaxial.axial_strain (" +
+                                                     num(p["axial_strain"]) +
+                                                     "): the shear ramps its rate up over that much strain; a longer "
+                                                     "axial_strain or a shorter shear_ramp_strain");
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {
@@ -308,6 +317,11 @@ std::string advice(const nlohmann::json& p) {
     next_note(os, 6) << "material.density (" << c.material.density
        << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
        << " kg/m^3); triaxial.density_scale scales material.density instead";
+  // Rows every sample_steps steps replace rows every sample_strain of strain: tasks
+  // that differ only in sample_strain then store the same series under different keys.
+  if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)
+    next_note(os, 6) << "triaxial.sample_strain (" << c.sample_strain << ") is not used: a row is taken every "
+       << "triaxial.sample_steps (" << c.sample_steps << ") steps of shear instead";
   return os.str();
 }
 

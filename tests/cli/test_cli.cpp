@@ -309,10 +309,11 @@ TEST(Cli, AWhereOnAParameterAtItsDefaultMatchesTheTasksThatLeftItOut) {
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 2) << r.out;  // the header and one task
   EXPECT_EQ(r.out.find("\n1,sizes,done,"), r.out.find('\n')) << r.out;
-  // Unfiltered, the column says what the task that left it out ran with.
+  // Unfiltered, the column says what the task that left it out ran with (columns in
+  // key order, as JSON's params).
   r = run_demcal({"query", "--format", "csv"}, d.path.string());
-  EXPECT_NE(r.out.find(",1.0,uniform,"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find(",1.0,uniform_mass,"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(",1,uniform,0.2,"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(",1,uniform_mass,0.2,"), std::string::npos) << r.out;
   r = run_demcal({"query", "--where", "size_distribution=uniform_mass", "--format", "csv"}, d.path.string());
   EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 2) << r.out;
   // A database of only default tasks: the key is still known.
@@ -750,6 +751,31 @@ TEST(Cli, AnEditedJobSaysWhichTasksLeftIt) {
   EXPECT_EQ(rows[0]["index"], 0) << rows.dump();
   EXPECT_TRUE(rows[2]["index"].is_null()) << rows.dump();
   EXPECT_EQ(rows[2]["job"], "small") << rows.dump();
+}
+
+// A task that no job holds and that finished with a warning: the warning does not
+// hide the note, in the table or in CSV (a `note` column, there only when needed).
+TEST(Cli, ATaskNoJobHoldsSaysSoBesideItsWarning) {
+  TempDir d;
+  auto job = nlohmann::json::parse(collision_job("w", {0.05, 1.3}, 300, 20000));
+  job["collision"]["energy_guard"] = -1.0;  // 1.3 then finishes, warning of the energy it made
+  write(d.file("a.json"), job.dump());
+  ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
+  const Result held = run_demcal({"query", "--format", "csv"}, d.path.string());
+  EXPECT_EQ(held.out.substr(0, held.out.find('\n')).find(",note"), std::string::npos) << held.out;
+  job["grid"]["dt_factor"] = {0.05};
+  write(d.file("a.json"), job.dump());
+  ASSERT_EQ(run_demcal({"run", "a.json"}, d.path.string()).rc, 0);
+  const Result table = run_demcal({"query"}, d.path.string());
+  EXPECT_NE(table.out.find("[1] warning, [2] note"), std::string::npos) << table.out;
+  EXPECT_NE(table.out.find("[2] task 2: no job holds this task any more"), std::string::npos) << table.out;
+  const Result csv = run_demcal({"query", "--format", "csv"}, d.path.string());
+  const std::string header = csv.out.substr(0, csv.out.find('\n'));
+  EXPECT_NE(header.find(",error,warning,note"), std::string::npos) << header;
+  EXPECT_NE(csv.out.find("the integration created it"), std::string::npos) << csv.out;
+  EXPECT_NE(csv.out.find(",\"no job holds this task any more"), std::string::npos) << csv.out;
+  // The scene's defaults a job leaves out are columns too, as in JSON's params.
+  EXPECT_NE(header.find(",size_distribution,"), std::string::npos) << header;
 }
 
 // The same job file after an upgrade that changed a scene's physics (every key moves):

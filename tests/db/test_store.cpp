@@ -83,6 +83,21 @@ TEST(Store, CreatesSchemaWithVersionAndWal) {
   Store again(d.file("a.db"));  // reopening migrates nothing and succeeds
 }
 
+// A version-1 file that already has version 2's table (its version set back by hand,
+// or a migration whose version write was lost) migrates, its rows kept.
+TEST(Store, AMigrationFindsItsTableAlreadyThere) {
+  TempDir d;
+  {
+    Store s(d.file("a.db"));
+    s.put_job("j", "{}", tasks({"k1"}));
+    s.beat("node01:1:1");
+  }
+  raw_sql(d.file("a.db"), "PRAGMA user_version=1");
+  Store s(d.file("a.db"));
+  EXPECT_EQ(s.tasks("j").size(), 1u);
+  EXPECT_EQ(s.runner_tokens(), std::vector<std::string>{"node01:1:1"});
+}
+
 TEST(Store, ReadersLeaveNoWalFilesBehindAndCannotWrite) {
   // query and status open the store read-only: closing must leave the database one
   // file (a copy of demcal.db alone is then the whole record), and writes are refused.

@@ -2,11 +2,15 @@
 // by its process, one on another host by its heartbeat in the database.
 #include "../temp_dir.hpp"
 #include "db/store.hpp"
+#include "jobs/leftover_files.hpp"
 #include "jobs/liveness.hpp"
+#include "jobs/runner.hpp"
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <unistd.h>
 
@@ -62,6 +66,40 @@ TEST(Liveness, ARunnerOnAnotherHostIsJudgedByItsHeartbeat) {
   EXPECT_EQ(requeue_running_tasks(s, *s.find_job("j"), log), 2);
   for (const auto& r : s.tasks("j")) EXPECT_EQ(r.status, "pending");
   EXPECT_NE(log.str().find("re-queued 2 running task(s) (--requeue-running)"), std::string::npos) << log.str();
+}
+
+// A runner killed by SIGKILL leaves its workers' result files and HDF5 parts in the
+// job's folder; the next run removes those of runners that are gone, and nothing of a
+// live runner's, of another host's, or of a runner it has no token of.
+TEST(Liveness, TheFilesOfADeadRunnerAreRemovedAndNoOneElses) {
+  demcal::test::TempDir d;
+  db::Store s(d.file("a.db"));
+  const std::string here = runner_token(), gone_here = hostname() + ":999999999:1", elsewhere = "node03:9:1";
+  for (const auto& t : {here, gone_here, elsewhere}) s.beat(t);
+  const std::filesystem::path dir = d.file("out");
+  std::filesystem::create_directories(dir);
+  const auto touch = [&](const std::string& name) {
+    std::ofstream(dir / name) << "x";
+    return dir / name;
+  };
+  const auto dead_result = touch(".task-3." + file_name_safe(gone_here) + ".result.json");
+  const auto dead_tmp = touch(".task-4." + file_name_safe(gone_here) + ".result.json.tmp");
+  const auto dead_part = touch("7-abc.h5." + hostname() + "-999999999.part");
+  const auto live_result = touch(".task-5." + file_name_safe(here) + ".result.json");
+  const auto other_host = touch(".task-6." + file_name_safe(elsewhere) + ".result.json");
+  const auto unknown = touch(".task-8." + file_name_safe("node04:1:1") + ".result.json");
+  const auto live_part = touch("9-def.h5." + hostname() + "-" + std::to_string(getpid()) + ".part");
+  const auto other_part = touch("10-ghi.h5.node03-999999999.part");
+  const auto task_file = touch("11-jkl.h5");
+  EXPECT_EQ(remove_leftovers_of_dead_runners(dir, s, "not-this-one", nullptr), 3);
+  for (const auto& p : {dead_result, dead_tmp, dead_part}) EXPECT_FALSE(std::filesystem::exists(p)) << p;
+  for (const auto& p : {live_result, other_host, unknown, live_part, other_part, task_file})
+    EXPECT_TRUE(std::filesystem::exists(p)) << p;
+  // Another host's runner silent past the lease is gone too.
+  age_heartbeat(d.file("a.db"), elsewhere, kRunnerLeaseS + 5);
+  EXPECT_EQ(remove_leftovers_of_dead_runners(dir, s, "not-this-one", nullptr), 1);
+  EXPECT_FALSE(std::filesystem::exists(other_host));
+  EXPECT_EQ(remove_leftovers_of_dead_runners(d.file("missing"), s, "x", nullptr), 0);  // no folder: nothing to do
 }
 
 // --requeue-running takes the user's word for runners elsewhere, but a runner alive on

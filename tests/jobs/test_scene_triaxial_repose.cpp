@@ -764,3 +764,43 @@ TEST(TriaxialReposeScenes, QuickReposeTaskRunsThroughTheRunner) {
   expect_in(m, "time_to_rest_s", 0, 1.5);
   expect_in(m, "wall_s", 0, 600);
 }
+
+// Rows every sample_steps steps replace rows every sample_strain: a grid over
+// sample_strain with sample_steps set runs the same series under several keys. Noted.
+TEST(TriaxialReposeScenes, ASampleStrainThatSampleStepsOverridesIsNotedUnused) {
+  auto notes_of = [](const json& j) {
+    std::string all;
+    for (const auto& n : parse(j).notes) all += n + "\n";
+    return all;
+  };
+  json j = triaxial_base();
+  j["triaxial"]["sample_strain"] = 0.005;
+  EXPECT_EQ(notes_of(j).find("sample_strain"), std::string::npos) << notes_of(j);  // used
+  j["triaxial"]["sample_steps"] = 2000;
+  EXPECT_NE(notes_of(j).find("triaxial.sample_strain (0.005) is not used: a row is taken every triaxial.sample_steps "
+                             "(2000) steps of shear instead"),
+            std::string::npos)
+      << notes_of(j);
+  j["triaxial"].erase("sample_strain");  // the default: nothing the job wrote goes unused
+  EXPECT_EQ(notes_of(j).find("sample_strain"), std::string::npos) << notes_of(j);
+}
+
+// theta_deg defaults to 0: a repose job that leaves it out asks for frictionless
+// grains, which heap nothing. Noted, and eta's uselessness with it.
+TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
+  auto notes_of = [](const json& j) {
+    std::string all;
+    for (const auto& n : parse(j).notes) all += n + "\n";
+    return all;
+  };
+  json j = repose_base();
+  EXPECT_EQ(notes_of(j).find("theta_deg is 0"), std::string::npos) << notes_of(j);
+  j["material"].erase("theta_deg");
+  const std::string notes = notes_of(j);
+  EXPECT_NE(notes.find("task #0: material.theta_deg is 0 (its default when the job leaves it out): frictionless grains "
+                       "build no heap, they spread and may still be moving at repose.time_limit (not_settled)\n"),
+            std::string::npos)  // eta 0: nothing said of it
+      << notes;
+  EXPECT_NE(notes.find("#1: material.theta_deg is 0"), std::string::npos) << notes;
+  EXPECT_NE(notes.find("and material.eta exerts no moment without friction"), std::string::npos) << notes;
+}

@@ -2,6 +2,7 @@
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
 
+#include <algorithm>
 #include <gtest/gtest.h>
 
 #include <functional>
@@ -97,6 +98,9 @@ const std::vector<Bad>& cases() {
       {"scene_key_in_material", [](json& j) { j["material"]["particles"] = 30; },
        "material.particles: belongs in the \"collision\" section"},
       {"grid_bad_value", [](json& j) { j["grid"]["eta"] = {-1}; }, "grid.eta[0]"},
+      {"grid_duplicate", [](json& j) { j["grid"]["eta"] = {0.1, 0.2, 0.1}; }, "grid.eta[2]"},
+      // Apart past the 12th digit: one value to every reader of the results.
+      {"grid_duplicate_to_12_digits", [](json& j) { j["grid"]["eta"] = {0.1, 0.1000000000000001}; }, "grid.eta[1]"},
       // A check of two fields (min below max) is blamed on the grid value it failed on.
       {"grid_d_min_over_max", [](json& j) { j["grid"]["d_min"] = {0.0005, 0.003}; }, "grid.d_min[1]"},
       {"replicas_zero", [](json& j) { j["replicas"] = 0; }, "replicas"},
@@ -139,9 +143,14 @@ TEST(Validation, MalformedJsonReportsLineAndColumn) {
 TEST(Validation, NonFiniteNumbersRejected) {
   std::string text = kBase;
   text.replace(text.find("3e7"), 3, "1e999");
-  // The parser cannot say where an overflowing number sat; it quotes the literal.
+  // The parser cannot say where an overflowing number sat; it quotes the literal,
+  // which is found in the text.
   const std::string msg = error_of(text);
   EXPECT_NE(msg.find("1e999"), std::string::npos) << msg;
+  const std::size_t at = text.find("1e999");
+  const std::size_t line = 1 + static_cast<std::size_t>(std::count(text.begin(), text.begin() + at, '\n'));
+  const std::size_t col = at - text.rfind('\n', at);
+  EXPECT_EQ(msg.rfind("job.json:" + std::to_string(line) + ":" + std::to_string(col) + ": ", 0), 0u) << msg;
   EXPECT_NE(msg.find("finite"), std::string::npos) << msg;
   EXPECT_NE(error_of("{\"name\": \"x\", \"scene\": \"collision\", \"material\": {\"kn\": NaN}}"), "");
 }
