@@ -300,7 +300,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
     std::ofstream g(script);
     g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
       << "set title " << gnuplot_quoted("demcal study " + s.name + (s.smoothed_peak ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
-                                        std::to_string(s.replicas) + " replicas per setting)") << " noenhanced\n"
+                                        std::to_string(s.replicas) + (s.replicas == 1 ? " replica" : " replicas") + " per setting)") << " noenhanced\n"
       << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
       << "set ylabel '|metric - reference| [deg]; bars: replica standard deviation' noenhanced\n"
       << "set logscale x\nset grid\nset key below box noenhanced\n"
@@ -341,6 +341,7 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   }
   run_gnuplot_script(script.string());
   image.commit();
+  keep_script_redrawable(script.string(), dir.string(), {{image.part(), png.string()}});
   k.chart = png.string();
 }
 
@@ -588,15 +589,16 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   }
   s.recommendation = summary.str();
 
+  // A run of some knobs names its files after them, charts included, so that runs of
+  // other knobs (or of the same knob at other replicas) into the same folder keep
+  // theirs, and a chart never shows another run than the table beside it.
+  if (knobs.size() < d.knobs.size())
+    for (const auto& k : knobs) s.stem += "-" + k.name;
+  const std::string& stem = s.stem;
   for (auto& k : s.knobs) {
     write_fidelity_chart(s, k, dir);
     s.files.push_back(k.chart);
   }
-  // A run of some knobs names its table after them, so that runs of other knobs
-  // into the same folder keep theirs (the charts are per knob already).
-  std::string stem = s.stem;
-  if (knobs.size() < d.knobs.size())
-    for (const auto& k : knobs) stem += "-" + k.name;
   const fs::path csv = dir / (stem + ".csv");
   write_fidelity_csv(s, csv);
   s.files.push_back(csv.string());

@@ -95,6 +95,7 @@ GrazingStudy run_grazing_study(const StudyOptions& o) {
   }
   run_gnuplot_script(script.string());
   image.commit();
+  keep_script_redrawable(script.string(), dir.string(), {{image.part(), png.string()}});
   s.files = {csv.string(), png.string()};
   return s;
 }

@@ -234,7 +234,7 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
                             " holes" +
                             (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : "");
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
-    << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe()) : quoted(r.title))
+    << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe(metric_spec(rs.metric).unit)) : quoted(r.title))
     << " noenhanced font ',10' offset 0,0.6\n"
     << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel "
     << quoted(flat ? rs.label + ": " + num(zlo) + " everywhere" : rs.label) << " noenhanced\n"

@@ -18,17 +18,32 @@ bool is_alias(const std::string& name) {
   return std::find(a.begin(), a.end(), name) != a.end();
 }
 
+namespace {
+// The unit a stored metric's name ends with (the scenes' naming: angles *_deg,
+// stresses *_pa, times *_s); "" for a pure number (porosity, a ratio, a count).
+std::string unit_of(const std::string& name) {
+  static const std::pair<const char*, const char*> suffixes[] = {
+      {"_deg", "deg"}, {"_pa", "Pa"}, {"_kpa", "kPa"}, {"_s", "s"}, {"_j", "J"}, {"_m", "m"}};
+  for (const auto& [tail, unit] : suffixes) {
+    const std::string t(tail);
+    if (name.size() > t.size() && name.compare(name.size() - t.size(), t.size(), t) == 0) return unit;
+  }
+  return "";
+}
+}  // namespace
+
 MetricSpec metric_spec(const std::string& name) {
-  if (name == "phi_peak") return {name, "phi_peak (deg)", "phi_peak_deg", ""};
-  if (name == "phi_cv") return {name, "phi_cv (deg)", "phi_cv_deg", ""};
-  if (name == "phi_diff") return {name, "phi_peak - phi_cv (deg)", "phi_peak_deg", "phi_cv_deg"};
-  if (name == "repose") return {name, "angle of repose (deg)", "repose_deg", ""};
+  if (name == "phi_peak") return {name, "phi_peak (deg)", "phi_peak_deg", "", "deg"};
+  if (name == "phi_cv") return {name, "phi_cv (deg)", "phi_cv_deg", "", "deg"};
+  if (name == "phi_diff") return {name, "phi_peak - phi_cv (deg)", "phi_peak_deg", "phi_cv_deg", "deg"};
+  if (name == "repose") return {name, "angle of repose (deg)", "repose_deg", "", "deg"};
   // A stored name an alias reads (phi_peak_deg) is labelled as the alias is.
   for (const auto& a : metric_aliases()) {
     const MetricSpec s = metric_spec(a);
-    if (s.minus.empty() && s.plus == name) return {name, s.label, s.plus, ""};
+    if (s.minus.empty() && s.plus == name) return {name, s.label, s.plus, "", s.unit};
   }
-  return {name, name, name, ""};
+  const std::string unit = unit_of(name);
+  return {name, unit.empty() ? name : name + " (" + unit + ")", name, "", unit};
 }
 
 std::pair<std::string, std::string> stored_reading(const std::string& name) {

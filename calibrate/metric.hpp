@@ -13,6 +13,7 @@ struct MetricSpec {
   std::string label;  // for plots and tables, e.g. "phi_peak (deg)"
   std::string plus;   // stored metric
   std::string minus;  // stored metric subtracted from `plus` ("" for none)
+  std::string unit;   // "deg", "Pa", "s", ... from the stored name's suffix; "" for a pure number
 };
 
 // phi_peak, phi_cv, phi_diff, repose.

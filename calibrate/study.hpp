@@ -59,6 +59,7 @@ struct TimestepPoint {
   // friction, largest gain with it; signed), drift_mean / drift_sd their mean and
   // spread. One replica's drift is noise-dominated: a gas of 1,250 grains over 1 ms
   // gave +0.10 to +0.19 /s at k = 0.3 across four seeds.
+  // dt: the step, mean over the replicas (each sample's smallest grain sets its own).
   double dt = 0, drift = 0;
   double drift_mean = 0, drift_sd = 0;
   int replicas = 0;
@@ -88,6 +89,11 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& options);
 // dt, max_relative_error, wall_s_per_simulated_s): failed if any replica failed or
 // drifted non-finitely, else the worst replica's drift with the mean and sd beside it.
 TimestepPoint timestep_point(bool friction, double factor, const std::vector<ResultRow>& rows);
+// Where the method fails: unstable, or the worst replica's energy grew (with friction;
+// either way without) by more than kTimestepExplode tolerances per simulated second:
+// the charts' failure region and the CSV's failure column.
+constexpr double kTimestepExplode = 100.0;
+bool timestep_failed(const TimestepPoint& p, double tolerance);
 
 struct GrazingStudy {
   struct Row {

@@ -10,11 +10,14 @@
 #include "jobs/series_plot.hpp"
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace demcal::calibrate::study_support {
 
@@ -46,6 +49,30 @@ class WholeTextFile : private PartHolder, public std::ofstream {
   }
 };
 
+
+// gnuplot ran `script` on the images' hidden parts, with paths through the study's
+// folder: the copy kept beside the charts names the images and data files by name
+// alone, so that `cd FOLDER && gnuplot SCRIPT` redraws them wherever the folder went.
+// `images`: (part, final path) of each image the script draws.
+inline void keep_script_redrawable(const std::string& script, const std::string& dir,
+                                   const std::vector<std::pair<std::string, std::string>>& images) {
+  std::ifstream in(script);
+  std::stringstream text;
+  text << in.rdbuf();
+  in.close();
+  std::string s = text.str();
+  const auto replace_all = [&s](const std::string& from, const std::string& to) {
+    if (from.empty()) return;
+    for (std::size_t at = 0; (at = s.find(from, at)) != std::string::npos; at += to.size()) s.replace(at, from.size(), to);
+  };
+  for (const auto& [part, final_path] : images)
+    replace_all(gnuplot_quoted(part), gnuplot_quoted(std::filesystem::path(final_path).filename().string()));
+  // Inside quotes only: a path prefix is the folder's, never a title's words.
+  replace_all("'" + (std::filesystem::path(dir) / "").string(), "'");
+  WholeTextFile out(script);
+  out << "# redraw: cd into this folder, then gnuplot " << std::filesystem::path(script).filename().string() << "\n" << s;
+  out.commit();
+}
 
 inline double metric(const jobs::ResultRow& r, const std::string& name) {
   for (const auto& [k, v] : r.metrics)

@@ -149,13 +149,15 @@ Eigen::VectorXd Surrogate::hat(double theta, double eta) const {
   return coef_map_.transpose() * basis;
 }
 
-std::string Surrogate::describe() const {
-  char b[160];
+std::string Surrogate::describe(const std::string& unit) const {
+  char b[200];
+  const std::string u = unit.empty() ? "" : " " + unit;
   if (kind_ == SurrogateKind::thin_plate)
-    std::snprintf(b, sizeof b, "%s (smoothing %.3g), LOO RMS %.3g over %d points", kind_name(kind_).c_str(), lambda_,
-                  loo_rms_, points());
+    std::snprintf(b, sizeof b, "%s (smoothing %.3g), LOO RMS %.3g%s over %d points", kind_name(kind_).c_str(), lambda_,
+                  loo_rms_, u.c_str(), points());
   else
-    std::snprintf(b, sizeof b, "%s, LOO RMS %.3g over %d points", kind_name(kind_).c_str(), loo_rms_, points());
+    std::snprintf(b, sizeof b, "%s, LOO RMS %.3g%s over %d points", kind_name(kind_).c_str(), loo_rms_, u.c_str(),
+                  points());
   return b;
 }
 

@@ -39,7 +39,8 @@ class Surrogate {
   Eigen::VectorXd hat(double theta, double eta) const;
   bool same_points(const Surrogate& other) const { return u_ == other.u_ && v_ == other.v_; }
   const std::vector<SurrogateCandidate>& candidates() const { return candidates_; }
-  std::string describe() const;  // e.g. "thin-plate spline (lambda 1e-3), LOO RMS 0.21 over 30 points"
+  // e.g. "thin-plate spline (lambda 1e-3), LOO RMS 0.21 deg over 30 points"; `unit` of the metric fitted
+  std::string describe(const std::string& unit = "") const;
 
   friend Surrogate fit_surrogate(const std::vector<double>&, const std::vector<double>&, const std::vector<double>&,
                                  const std::vector<double>&, const Box&);

@@ -87,16 +87,6 @@ void mark_pareto(std::vector<TimestepPoint>& pts) {
   }
 }
 
-// Where the method fails: the run went unstable (non-finite state, overlap or the
-// scene's checks), or energy grew by more than kExplode tolerances per simulated
-// second. Friction and rolling dissipate, so only a gain counts there; without
-// friction any drift of either sign is error, but a loss that large is failure too.
-constexpr double kExplode = 100.0;
-bool failed(const TimestepPoint& p, double tol) {
-  if (!p.ok) return true;
-  return p.friction ? p.drift > kExplode * tol : std::abs(p.drift) > kExplode * tol;
-}
-
 void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
   const double floor_v = 1e-9;
   double top = 1.0;
@@ -105,7 +95,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
   const double ceiling = top * 30.0;  // failed runs are drawn here
   double first_fail = 1e300;
   for (const auto& p : s.points)
-    if (failed(p, s.tolerance)) first_fail = std::min(first_fail, p.dt_factor);
+    if (timestep_failed(p, s.tolerance)) first_fail = std::min(first_fail, p.dt_factor);
 
   const fs::path csv = dir / "timestep.csv";
   {
@@ -116,7 +106,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
       // A failed point has no drift, error or cost to give: nan, not a 0 that reads as exact.
       const auto v = [&](double x) { return p.ok ? fmt(x, 6) : std::string("nan"); };
       c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << v(p.dt) << ","
-        << (p.ok ? "ok" : "unstable") << "," << (failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
+        << (p.ok ? "ok" : "unstable") << "," << (timestep_failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
         << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
         << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
     }
@@ -200,11 +190,20 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
   run_gnuplot_script(script.string());
   drift_image.commit();
   cost_image.commit();
+  keep_script_redrawable(script.string(), dir.string(),
+                         {{drift_image.part(), drift_png.string()}, {cost_image.part(), cost_png.string()}});
   s.files.push_back(drift_png.string());
   s.files.push_back(cost_png.string());
 }
 
 }  // namespace
+
+// Friction and rolling dissipate, so only a gain counts there; without friction any
+// drift of either sign is error, but a loss that large is failure too.
+bool timestep_failed(const TimestepPoint& p, double tol) {
+  if (!p.ok) return true;
+  return p.friction ? p.drift > kTimestepExplode * tol : std::abs(p.drift) > kTimestepExplode * tol;
+}
 
 // One factor of one series over its replicas: failed if any replica failed; else the
 // worst replica's drift (what the recommendation judges), the mean and spread beside it.
@@ -223,11 +222,12 @@ TimestepPoint timestep_point(bool friction, double factor, const std::vector<Res
       continue;
     }
     drifts.push_back(drift);
-    p.dt = metric(r, "dt");
+    p.dt += metric(r, "dt");
     p.max_relative_error = std::max(p.max_relative_error, metric(r, "max_relative_error"));
     p.cost += metric(r, "wall_s_per_simulated_s") / static_cast<double>(rows.size());
   }
   if (!p.ok || drifts.empty()) return p;
+  p.dt /= static_cast<double>(drifts.size());
   p.drift = drifts.front();
   for (double d : drifts) {
     p.drift_mean += d / static_cast<double>(drifts.size());

@@ -35,7 +35,7 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
   for (std::size_t k = 0; k < cal.models.size(); ++k) {
     const auto& m = cal.models[k];
     const int partial = cal.surfaces[k].partials();
-    out << "  " << m.metric << " (job " << m.job << "): " << m.surrogate.describe() << ", " << cal.surfaces[k].holes()
+    out << "  " << m.metric << " (job " << m.job << "): " << m.surrogate.describe(calibrate::metric_spec(m.metric).unit) << ", " << cal.surfaces[k].holes()
         << " hole(s), " << (partial > 0 ? std::to_string(partial) + " point(s) short of replicas, " : std::string())
         << "replica se "
         << (m.replica_se > 0 ? g(m.replica_se, 3) : std::string("unknown (one replica a point: LOO alone measures the noise)"))

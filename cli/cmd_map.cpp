@@ -67,7 +67,7 @@ void add_map(CLI::App& app, int& exit_code) {
       std::cout << "wrote " << out << ": " << rs.label << " of job " << job << (pins.empty() ? "" : " (" + pins + ")")
                 << ", " << rs.with_data() << " point(s) with data, " << rs.holes() << " hole(s)"
                 << (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : std::string()) << "\n"
-                << "surrogate: " << s.describe() << "\n";
+                << "surrogate: " << s.describe(calibrate::metric_spec(rs.metric).unit) << "\n";
       for (const auto& p : rs.points)
         if (p.hole() && !p.refine)
           std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.without_value() << ")\n";

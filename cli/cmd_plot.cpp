@@ -1,6 +1,7 @@
 #include "common.hpp"
 
 #include "db/store.hpp"
+#include "jobs/moved_results.hpp"
 #include "jobs/hdf5_writer.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/query.hpp"
@@ -40,29 +41,21 @@ std::vector<std::string> split_commas(const std::string& s) {
   return out;
 }
 
-// The database and its results moved together (a cluster's results copied to a
-// laptop, a merged database with its parts/ folder): the stored path, absolute, names
-// the old place. The folder the database is in is searched for the stored path's
-// tail, the longest first: demcal-out/JOB/FILE beside it, parts/demcal-out/... of a
-// merge. The task key check below keeps it honest.
+// The results moved with the database: the stored path's tail, in the database's
+// folder (jobs/moved_results.hpp). The task key check below keeps it honest.
 std::string moved_with_the_database(const std::string& h5, const std::string& db) {
-  namespace fs = std::filesystem;
-  if (fs::exists(h5)) return h5;
-  std::error_code ec;
-  const fs::path stored(h5), dir = fs::weakly_canonical(fs::absolute(db), ec).parent_path();
-  std::vector<fs::path> parts(stored.begin(), stored.end());
-  for (std::size_t from = 1; from < parts.size(); ++from) {
-    fs::path tail;
-    for (std::size_t k = from; k < parts.size(); ++k) tail /= parts[k];
-    const fs::path here = dir / tail;
-    if (!fs::is_regular_file(here, ec)) continue;
-    std::cerr << "note: the task's HDF5 file is not at " << h5 << " any more; reading " << here.string()
-              << " (the same path's tail, in the database's folder)\n";
-    return here.string();
+  const std::optional<std::string> now = jobs::find_moved_result(h5, db);
+  if (!now) {
+    std::error_code ec;
+    std::cerr << "note: the task's HDF5 file is not at " << h5 << ", nor under "
+              << std::filesystem::weakly_canonical(std::filesystem::absolute(db), ec).parent_path().string()
+              << " (the database's folder) at any tail of that path\n";
+    return h5;
   }
-  std::cerr << "note: the task's HDF5 file is not at " << h5 << ", nor under " << dir.string()
-            << " (the database's folder) at any tail of that path\n";
-  return h5;
+  if (*now != h5)
+    std::cerr << "note: the task's HDF5 file is not at " << h5 << " any more; reading " << *now
+              << " (the same path's tail, in the database's folder)\n";
+  return *now;
 }
 }  // namespace
 

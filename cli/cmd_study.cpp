@@ -168,7 +168,7 @@ int study(const StudyArgs& a) {
   if (const int kept = s.tasks - s.reused - s.ran; kept > 0) std::cout << ", " << kept << " failed in an earlier run";
   std::cout << ")\n";
   std::cout << "series           dt_factor  status    drift/sim-s (worst)  mean +- sd of replicas   wall-s/sim-s  pareto\n";
-  bool past_shown = false;
+  bool past_shown = false, failed_shown = false;
   for (const auto& p : s.points) {
     char line[240];
     // A run past its law's critical step that did not blow up within the run is no
@@ -176,15 +176,23 @@ int study(const StudyArgs& a) {
     const double critical = p.friction ? s.critical_factor_full : s.critical_factor_frictionless;
     const bool past = critical > 0.0 && p.dt_factor > critical * (1.0 + 1e-9);
     past_shown = past_shown || (p.ok && past);
+    const bool blew = p.ok && calibrate::timestep_failed(p, s.tolerance);
+    failed_shown = failed_shown || blew;
     if (p.ok)
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19.3e  %10.2e +- %8.2e  %12.3e  %s\n",
-                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, past ? "ran*" : "ok", p.drift,
+                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor,
+                    blew ? "failed" : past ? "ran*" : "ok", p.drift,
                     p.drift_mean, p.drift_sd, p.cost, p.pareto ? "*" : "");
     else  // an unstable run has no drift or cost to show
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19s  %22s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
                     p.dt_factor, "unstable", "-", "-", "-");
     std::cout << line;
   }
+  std::cout << "worst: the replica with the largest |drift| (frictionless) or the largest gain (friction+rolling, "
+               "which dissipates: only a gain is error)\n";
+  if (failed_shown)
+    std::cout << "failed: finished, but its energy drift exceeds " << calibrate::kTimestepExplode
+              << " x the tolerance per simulated second (the charts' failure region)\n";
   if (past_shown)
     std::cout << "ran*: past its law's critical step (frictionless " << s.critical_factor_frictionless << ", "
               << s.critical_mode_full << " " << s.critical_factor_full

@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <fcntl.h>
+#include <cstring>
 #include <unistd.h>
 
 namespace demcal::cli {
@@ -215,6 +217,15 @@ void require_writable_file(const std::string& flag, const std::string& file) {
   if (::access(parent.c_str(), W_OK) != 0)
     throw jobs::JobError(flag, "cannot write into the folder " + parent.string() + " (for " + file + ")");
   if (std::filesystem::is_directory(file)) throw jobs::JobError(flag, file + " is a folder, not a file");
+  // access() says yes to root whatever the file system takes (/proc, a read-only
+  // mount): a file made and removed there says what the writer will find.
+  const std::string probe = (parent / (".demcal-probe-" + std::to_string(::getpid()))).string();
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+  if (fd < 0)
+    throw jobs::JobError(flag, "cannot write into the folder " + parent.string() + " (for " + file + "): " +
+                                   std::strerror(errno));
+  ::close(fd);
+  ::unlink(probe.c_str());
 }
 
 void print_notes(const std::string& job_file, const std::vector<std::string>& notes) {

@@ -3,6 +3,7 @@
 #include "decimal.hpp"
 
 #include "job_error.hpp"
+#include "moved_results.hpp"
 #include "params.hpp"
 #include "scene_registry.hpp"
 #include "text_groups.hpp"
@@ -13,6 +14,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iomanip>
+#include <optional>
 #include <set>
 
 namespace demcal::jobs {
@@ -501,6 +503,26 @@ std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, con
   }
   if (out.empty() && why_none) *why_none = why_none_match(all, where);
   return out;
+}
+
+ResultFilesFound locate_result_files(std::vector<ResultRow>& rows, const std::string& db) {
+  ResultFilesFound n;
+  for (auto& r : rows) {
+    bool moved = false, missing = false;
+    for (std::string* path : {&r.hdf5, &r.xdmf}) {
+      if (path->empty()) continue;
+      const std::optional<std::string> now = find_moved_result(*path, db);
+      if (!now) {
+        missing = true;
+      } else if (*now != *path) {
+        *path = *now;
+        moved = true;
+      }
+    }
+    n.moved += moved && !missing;
+    n.missing += missing;
+  }
+  return n;
 }
 
 Format parse_format(const std::string& text) {

@@ -36,6 +36,14 @@ struct ResultRow {
 std::vector<ResultRow> select_rows(db::Store& store, const std::string& job, const std::vector<Where>& where,
                                    std::string* why_none = nullptr);
 
+// The rows' HDF5 and Xdmf paths where the files are now: a database moved together
+// with its results keeps the old absolute paths (jobs/moved_results.hpp). Counts the
+// tasks whose files were found elsewhere, and those whose files are nowhere.
+struct ResultFilesFound {
+  int moved = 0, missing = 0;
+};
+ResultFilesFound locate_result_files(std::vector<ResultRow>& rows, const std::string& db);
+
 // A task's file of one kind ("hdf5", "xdmf") as the database records it, "" when it has none.
 using Artifacts = std::vector<std::pair<std::string, std::string>>;  // kind, path (Store::artifacts)
 std::string artifact_of(const Artifacts& artifacts, const std::string& kind);

@@ -306,6 +306,7 @@ TEST(CalibrateCli, FitPrintsTheAnswerAndStoresAFitRow) {
   EXPECT_NE(r.out.find("best: theta = "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("95% region"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("LOO RMS"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" deg over "), std::string::npos) << r.out;  // the leave-one-out error has the angle's unit
   std::printf("%s", r.out.c_str());
   {
     db::Store s(db, true);

@@ -1,3 +1,4 @@
+#include "calibrate/metric.hpp"
 #include "calibrate/surrogate.hpp"
 #include "synthetic.hpp"
 
@@ -95,3 +96,15 @@ TEST(Surrogate, RefusesPointsThatCannotCarryASurface) {
 
 }  // namespace
 }  // namespace demcal::test
+
+// A metric's unit, for map titles and the surrogate's error: the four angles, and a
+// stored name by its suffix; none for a pure number.
+TEST(Metric, AStoredMetricIsLabelledWithTheUnitItsNameEndsWith) {
+  EXPECT_EQ(demcal::calibrate::metric_spec("phi_cv").unit, "deg");
+  EXPECT_EQ(demcal::calibrate::metric_spec("phi_cv_deg").label, "phi_cv (deg)");
+  EXPECT_EQ(demcal::calibrate::metric_spec("phi_cv_se_deg").label, "phi_cv_se_deg (deg)");
+  EXPECT_EQ(demcal::calibrate::metric_spec("q_peak_pa").unit, "Pa");
+  EXPECT_EQ(demcal::calibrate::metric_spec("wall_s").unit, "s");
+  EXPECT_EQ(demcal::calibrate::metric_spec("porosity_final").label, "porosity_final");
+  EXPECT_EQ(demcal::calibrate::metric_spec("porosity_final").unit, "");
+}

@@ -593,6 +593,12 @@ TEST(Cli, PlotDrawsPngAndSvg) {
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--out: the folder"), std::string::npos) << r.err;
   EXPECT_EQ(r.err.find("gnuplot"), std::string::npos) << r.err;
+  // So is a folder that takes no file whatever access() tells root (/proc).
+  r = run_demcal({"plot", id, "--series", "energy", "--x", "step", "--y", "total", "--out", "/proc/e.png"},
+                 d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--out: cannot write into the folder /proc (for /proc/e.png): "), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("gnuplot"), std::string::npos) << r.err;
   // A file at the task's path written for another task (a database sharing the output
   // folder) is refused, not plotted.
   {
@@ -641,7 +647,19 @@ TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
   r = run_demcal({"plot", "1", "--db", "e/m.db", "--series", "energy", "--out", "deep.svg"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(r.err.find("reading " + fs::canonical(d.path / "e").string() + "/parts/out/deep/"), std::string::npos) << r.err;
+  // query's JSON gives the paths where the files are now, and says so.
+  r = run_demcal({"query", "--db", "e/m.db", "--format", "json"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)[0]["hdf5"].get<std::string>().rfind(fs::canonical(d.path / "e").string() +
+                                                                              "/parts/out/deep/", 0),
+            0u)
+      << r.out;
+  EXPECT_NE(r.err.find("note: the result files of 1 task(s) are not where the database recorded them"),
+            std::string::npos)
+      << r.err;
   fs::remove_all(d.path / "e" / "parts");
+  r = run_demcal({"query", "--db", "e/m.db", "--format", "json"}, d.path.string());
+  EXPECT_NE(r.err.find("note: the result files of 1 task(s) are missing"), std::string::npos) << r.err;
   r = run_demcal({"plot", "1", "--db", "e/m.db", "--series", "energy", "--out", "gone.svg"}, d.path.string());
   EXPECT_EQ(r.rc, 1);
   EXPECT_NE(r.err.find("nor under " + fs::canonical(d.path / "e").string()), std::string::npos) << r.err;

@@ -178,7 +178,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
                                          "--workers", "1", "--db", "s.db", "--out", "f"};
   const Result r = run_demcal(args, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  for (const char* f : {"fidelity_dt.png", "fidelity-dt.csv", "fidelity-dt_recommendation.txt",
+  for (const char* f : {"fidelity-dt_dt.png", "fidelity-dt.csv", "fidelity-dt_recommendation.txt",
                         "jobs/study-fidelity-quick-dt.json"}) {
     const fs::path p = d.path / "f" / f;
     EXPECT_TRUE(fs::exists(p) && fs::file_size(p) > 0) << f;
@@ -191,7 +191,14 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_NE(r.out.find("failed tasks (2)"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("dt=2 seed 1: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("dt=2 seed 2: "), std::string::npos) << r.out;
-  EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"2: 2/2 failed\""), std::string::npos);
+  EXPECT_NE(slurp(d.file("f/fidelity-dt_dt.dat")).find("\"2: 2/2 failed\""), std::string::npos);
+  // The script kept beside the chart redraws it from its own folder: names, no paths,
+  // no hidden part.
+  const std::string gp = slurp(d.file("f/fidelity-dt_dt.gp"));
+  EXPECT_NE(gp.find("set output 'fidelity-dt_dt.png'"), std::string::npos) << gp;
+  EXPECT_NE(gp.find("plot 'fidelity-dt_dt.dat'"), std::string::npos) << gp;
+  EXPECT_EQ(gp.find(".part"), std::string::npos) << gp;
+  EXPECT_EQ(gp.find("'f/"), std::string::npos) << gp;
   const std::string csv = slurp(d.file("f/fidelity-dt.csv"));
   EXPECT_NE(csv.find("phi_peak_deg_error"), std::string::npos) << csv;
   EXPECT_NE(csv.find("dt,2,0,0,2,2,"), std::string::npos) << csv;
@@ -238,7 +245,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
       << spiked.out;
   EXPECT_NE(slurp(d.file("f/fidelity-dt_recommendation.txt")).find("  dt=0.15 seed 2: phi_peak "), std::string::npos);
   EXPECT_NE(slurp(d.file("f/fidelity-dt.csv")).find(",1,\""), std::string::npos);  // peak_spikes of the 0.15 row
-  EXPECT_NE(slurp(d.file("f/fidelity_dt.dat")).find("\"0.15 (ref) (1/2 peak on a spike)\""), std::string::npos);
+  EXPECT_NE(slurp(d.file("f/fidelity-dt_dt.dat")).find("\"0.15 (ref) (1/2 peak on a spike)\""), std::string::npos);
 
   // Judged by the running mean's peak instead: the same tasks, files of its own, and
   // the raised replica no longer moves the reference (its raw mean is 5/2 deg higher).
@@ -253,7 +260,7 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
             std::string::npos)
       << sm.out;
   EXPECT_NE(sm.out.find("recommended settings (fidelity, phi_peak by its running mean,"), std::string::npos) << sm.out;
-  for (const char* f : {"fidelity-smoothed-peak_dt.png", "fidelity-smoothed-peak-dt.csv",
+  for (const char* f : {"fidelity-smoothed-peak-dt_dt.png", "fidelity-smoothed-peak-dt.csv",
                         "fidelity-smoothed-peak-dt_recommendation.txt"})
     EXPECT_TRUE(fs::exists(d.path / "f" / f)) << f;
   EXPECT_EQ(slurp(d.file("f/fidelity-dt_recommendation.txt")), raw_recommendation);  // the raw run's files kept

@@ -10,7 +10,7 @@ TEST(CliStudyLong, ReposeFidelityQuickChartsRecommendsAndReuses) {
                                          "--workers", "2", "--db", "s.db", "--out", "r"};
   const Result r = run_demcal(args, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  for (const char* f : {"repose-fidelity_depth.png", "repose-fidelity-depth.csv", "repose-fidelity-depth_recommendation.txt",
+  for (const char* f : {"repose-fidelity-depth_depth.png", "repose-fidelity-depth.csv", "repose-fidelity-depth_recommendation.txt",
                         "jobs/study-repose-fidelity-quick-depth.json"}) {
     const fs::path p = d.path / "r" / f;
     EXPECT_TRUE(fs::exists(p) && fs::file_size(p) > 0) << f;
