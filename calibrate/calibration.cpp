@@ -72,6 +72,19 @@ void refuse_redundant(const std::vector<Target>& targets) {
                                    (minus.empty() ? "" : " - " + minus) +
                                    "): the misfit would count its residual twice; give it once");
   }
+  // Two readings of one angle (the walls' raw peak and its running mean, or the walls'
+  // and the interior's stress): their errors are one sample's, not independent ones.
+  static const std::vector<std::vector<std::string>> same_angle = {
+      {"phi_peak_deg", "phi_peak_smoothed_deg", "phi_peak_interior_deg"}, {"phi_cv_deg", "phi_cv_interior_deg"}};
+  for (const auto& group : same_angle) {
+    std::vector<std::string> given;
+    for (const auto& [read, name] : reads)
+      if (read.second.empty() && std::find(group.begin(), group.end(), read.first) != group.end()) given.push_back(name);
+    if (given.size() > 1)
+      throw JobError("--target", "\"" + given[0] + "\" and \"" + given[1] + "\" read the same angle of the same runs " +
+                                     "(two ways of measuring one peak or one critical state): the misfit would count " +
+                                     "one sample's error twice; target one of them");
+  }
   for (const auto& [diff, name] : reads) {
     if (diff.second.empty()) continue;
     const auto plus = reads.find({diff.first, ""}), minus = reads.find({diff.second, ""});

@@ -590,8 +590,8 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   s.recommendation = summary.str();
 
   // A run of some knobs names its files after them, charts included, so that runs of
-  // other knobs (or of the same knob at other replicas) into the same folder keep
-  // theirs, and a chart never shows another run than the table beside it.
+  // other knobs into the same folder keep theirs, and a chart never shows another run
+  // than the table beside it.
   if (knobs.size() < d.knobs.size())
     for (const auto& k : knobs) s.stem += "-" + k.name;
   const std::string& stem = s.stem;

@@ -67,8 +67,10 @@ inline void keep_script_redrawable(const std::string& script, const std::string&
   };
   for (const auto& [part, final_path] : images)
     replace_all(gnuplot_quoted(part), gnuplot_quoted(std::filesystem::path(final_path).filename().string()));
-  // Inside quotes only: a path prefix is the folder's, never a title's words.
-  replace_all("'" + (std::filesystem::path(dir) / "").string(), "'");
+  // Inside quotes only, as gnuplot_quoted wrote it (a quote in the folder's name
+  // doubled): a path prefix is the folder's, never a title's words.
+  const std::string prefix = gnuplot_quoted((std::filesystem::path(dir) / "").string());
+  replace_all(prefix.substr(0, prefix.size() - 1), "'");
   WholeTextFile out(script);
   out << "# redraw: cd into this folder, then gnuplot " << std::filesystem::path(script).filename().string() << "\n" << s;
   out.commit();

@@ -226,8 +226,8 @@ TimestepPoint timestep_point(bool friction, double factor, const std::vector<Res
     p.max_relative_error = std::max(p.max_relative_error, metric(r, "max_relative_error"));
     p.cost += metric(r, "wall_s_per_simulated_s") / static_cast<double>(rows.size());
   }
+  if (!drifts.empty()) p.dt /= static_cast<double>(drifts.size());
   if (!p.ok || drifts.empty()) return p;
-  p.dt /= static_cast<double>(drifts.size());
   p.drift = drifts.front();
   for (double d : drifts) {
     p.drift_mean += d / static_cast<double>(drifts.size());

@@ -126,10 +126,15 @@ void add_fit(CLI::App& app, int& exit_code) {
         rounds = calibrate::refine(store, req, cal, ro);
         if (!rounds.empty()) id = rounds.back().fit_id;
       }
+      // Rounds that ended because none were left, the candidate still moving: the
+      // answer is not settled, whatever its region says.
+      const double tolerance = calibrate::RefineOptions{}.tolerance;
+      const bool unsettled = !rounds.empty() && rounds.back().ok && !(rounds.back().move < tolerance);
       if (a->format == "json") {
         nlohmann::json j = id < 0 ? calibrate::fit_record(req, cal, 0).result
                                   : nlohmann::json::parse(store.fits().back().result_json);
         j["fit_id"] = id < 0 ? nlohmann::json(nullptr) : nlohmann::json(id);
+        if (!rounds.empty()) j["refine_converged"] = !unsettled;
         std::cout << j.dump(2) << "\n";
       } else {
         print_fit(std::cout, cal, id);
@@ -139,6 +144,11 @@ void add_fit(CLI::App& app, int& exit_code) {
                     << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta)
                     << (std::isfinite(r.move) ? "; moved " + g(100 * r.move, 3) + "% of the range" : std::string("; no answer"))
                     << " (fit " << r.fit_id << ")\n";
+        if (unsettled)
+          std::cout << "warning: the refinement stopped after its " << rounds.size()
+                    << " round(s) with the candidate still moving (" << g(100 * rounds.back().move, 3)
+                    << "% of the range in the last round; under " << g(100 * tolerance, 3)
+                    << "% counts as settled): the answer is not settled yet; run more rounds (--refine N)\n";
       }
       if (!cal.result.ok) {
         std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";

@@ -14,6 +14,8 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <iomanip>
+#include <sstream>
 
 namespace demcal::cli {
 
@@ -118,13 +120,21 @@ void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, c
   };
   // Beyond two standard errors and a fiftieth of the mean pressure (on exact data both
   // c and its error are round-off); with two pressures, beyond a tenth of their mean.
-  for (const auto& e : envs)
-    if (e.note.empty() && e.env.c > (std::isfinite(e.env.c_se) ? std::max(2.0 * e.env.c_se, 0.02 * mean(e.sigma3_kpa))
-                                                               : 0.1 * mean(e.sigma3_kpa)))
-      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": cohesion " << e.env.c
-                << (std::isfinite(e.env.c_se) ? " +- " + std::to_string(e.env.c_se) : std::string()) << " kPa from grains without cohesion: the straight line through the peaks has it from the "
-                   "envelope's curvature (a dense sample's peak angle falls with pressure) or from peaks of a shear "
-                   "too fast or a sample too small (the warnings above); phi at c = 0 is the other reading\n";
+  // Either sign: a negative intercept is a tension the grains cannot carry.
+  for (const auto& e : envs) {
+    const double bound = std::isfinite(e.env.c_se) ? std::max(2.0 * e.env.c_se, 0.02 * mean(e.sigma3_kpa))
+                                                   : 0.1 * mean(e.sigma3_kpa);
+    if (!e.note.empty() || !(std::abs(e.env.c) > bound)) continue;
+    std::ostringstream c;
+    c << std::setprecision(3) << e.env.c;
+    if (std::isfinite(e.env.c_se)) c << " +- " << e.env.c_se;
+    std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": cohesion " << c.str()
+              << " kPa from grains without cohesion: the straight line through the peaks has it from the envelope's "
+              << (e.env.c > 0 ? "curvature (a dense sample's peak angle falls with pressure)"
+                              : "slope (the peak angle rises with pressure here; a negative c is a tension)")
+              << " or from peaks of a shear too fast or a sample too small (the warnings above); phi at c = 0 is the "
+                 "other reading\n";
+  }
 }
 
 void add_envelope(CLI::App& app, int& exit_code) {

@@ -1,6 +1,7 @@
 #include "common.hpp"
 
 #include "db/merge.hpp"
+#include "db/store.hpp"
 #include "jobs/stop_signal.hpp"
 
 #include <iostream>
@@ -14,6 +15,21 @@ struct MergeArgs {
   std::string into = "demcal.db";
 };
 
+// A merge of parts whose runs were cut short (a shard killed, a SLURM merge that ran
+// anyway) succeeds: say what the merged jobs still lack, as status would.
+void say_unfinished(const std::string& into) {
+  db::Store store(into, /*read_only=*/true);
+  for (const auto& [job, by_status] : store.counts()) {
+    std::string lacking;
+    for (const char* st : {"pending", "running", "failed"})
+      if (const auto it = by_status.find(st); it != by_status.end() && it->second > 0)
+        lacking += (lacking.empty() ? "" : ", ") + std::to_string(it->second) + " " + st;
+    if (!lacking.empty())
+      std::cout << "job " << job << " in " << into << " has tasks without a result: " << lacking
+                << " (demcal status --db " << into << " says why; a part's run resumes with demcal run)\n";
+  }
+}
+
 int merge(const MergeArgs& a) {
   // Ctrl-C or SIGTERM ends the merge through its rollback, so nothing is half-written.
   jobs::StopSignalGuard guard;
@@ -23,6 +39,7 @@ int merge(const MergeArgs& a) {
             << " identical already there, " << r.kept << " kept (the destination's finished result), "
             << r.links_added << " job-task link(s) added, " << r.fits_added << " fit(s) added, "
             << r.conflicts.size() << " conflict(s)\n";
+  say_unfinished(a.into);
   for (const auto& c : r.conflicts) std::cerr << "demcal: conflict: " << c << "\n";
   if (!r.conflicts.empty()) {
     std::cerr << "demcal: " << r.conflicts.size()

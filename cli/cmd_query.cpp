@@ -35,11 +35,11 @@ void add_query(CLI::App& app, int& exit_code) {
       if (format == jobs::Format::json) {  // the form that gives the paths
         const jobs::ResultFilesFound f = jobs::locate_result_files(rows, a->db);
         if (f.moved > 0)
-          std::cerr << "note: the result files of " << f.moved << " task(s) are not where the database recorded them; "
+          std::cerr << "note: result files of " << f.moved << " task(s) are not where the database recorded them; "
                     << "the paths given are where they are now (the recorded path's tail, in the database's folder)\n";
         if (f.missing > 0)
-          std::cerr << "note: the result files of " << f.missing << " task(s) are missing: not at the recorded path, "
-                    << "nor at any tail of it in the database's folder (their paths are given as recorded)\n";
+          std::cerr << "note: result files of " << f.missing << " task(s) are missing: not at the recorded path, "
+                    << "nor at any tail of it in the database's folder (a missing file's path is given as recorded)\n";
       }
       if (rows.empty())
         std::cerr << "demcal: no task matches" << (where.empty() ? "" : " the --where filters: " + why) << "\n";

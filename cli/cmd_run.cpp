@@ -121,13 +121,18 @@ void add_run(CLI::App& app, int& exit_code) {
                   "join the parts' databases with demcal merge");
   cmd->add_flag("--mpi", a->mpi,
                 "MPI task farm under mpirun: rank 0 owns the database and hands out tasks, the other ranks run them");
-  cmd->add_option("--mpi-timeout", a->mpi_timeout,
+  auto* timeout_opt = cmd->add_option("--mpi-timeout", a->mpi_timeout,
                   "with --mpi: seconds without a heartbeat after which a worker rank counts as lost")
       ->capture_default_str()
       ->check(kFinite)
       ->check(CLI::Range(0.1, 86400.0));
-  cmd->callback([a, shard_opt, &exit_code] {
+  cmd->callback([a, shard_opt, timeout_opt, &exit_code] {
     a->shard_given = shard_opt->count() > 0;
+    if (!a->mpi && timeout_opt->count() > 0) {  // a farm's option on a local run: a command line mixed up
+      std::cerr << "demcal: error: --mpi-timeout: applies to an MPI run only (--mpi under mpirun)\n";
+      exit_code = kBadInput;
+      return;
+    }
     if (!a->mpi) {
       if (a->shard_given) {  // a bad --shard is the command line's fault, not the job file's
         exit_code = guarded("", [&] { return jobs::parse_shard(a->shard).active() ? kOk : kBadInput; });

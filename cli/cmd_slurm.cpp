@@ -53,7 +53,7 @@ void check_token(const std::string& option, const std::string& value, const char
 
 // Where the shards' databases and logs go: --parts, or parts/ beside the database.
 fs::path parts_folder(const SlurmArgs& a) {
-  return a.parts.empty() ? fs::absolute(a.db).parent_path() / "parts" : fs::absolute(a.parts);
+  return a.parts.empty() ? fs::absolute(a.db).lexically_normal().parent_path() / "parts" : fs::absolute(a.parts).lexically_normal();
 }
 
 // The script's first two lines: refuse_to_overwrite knows an earlier script by them.
@@ -63,7 +63,7 @@ constexpr const char* kHeader = "# SLURM array job for demcal job";
 std::string script(const SlurmArgs& a, const jobs::Job& job) {
   // Absolute: the script changes into the database's folder before running it.
   const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
-  const fs::path db = fs::absolute(a.db);
+  const fs::path db = fs::absolute(a.db).lexically_normal();
   const fs::path workdir = db.parent_path();
   const fs::path parts = parts_folder(a);
   const std::string n = std::to_string(a.array);
@@ -87,7 +87,7 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
     << sbatch_output_line(parts) << "\n"
     << "set -euo pipefail\n"
     << "DEMCAL=" << quote(demcal) << "\n"
-    << "JOB=" << quote(fs::absolute(a.job).string()) << "\n"
+    << "JOB=" << quote(fs::absolute(a.job).lexically_normal().string()) << "\n"
     << "WORKDIR=" << quote(workdir.string()) << "\n"
     << "PARTS=" << quote(parts.string()) << "\n"
     << "DB=" << quote(db.string()) << "\n"
@@ -186,7 +186,7 @@ int slurm(SlurmArgs a) {
   ::chmod(file.part().c_str(), 0755);
   file.commit("batch script");
   std::cout << "wrote " << a.out << ": " << job.tasks.size() << " task(s) of job " << job.name << " in " << a.array
-            << " shard(s) plus a merge into " << fs::absolute(a.db).string() << "\nsubmit with: bash " << a.out << "\n";
+            << " shard(s) plus a merge into " << fs::absolute(a.db).lexically_normal().string() << "\nsubmit with: bash " << a.out << "\n";
   if (static_cast<std::size_t>(a.array) > job.tasks.size())
     std::cerr << "note: " << a.array << " shards for " << job.tasks.size() << " task(s): shards " << job.tasks.size() + 1
               << ".." << a.array << " will have nothing to run (--array " << job.tasks.size() << " is enough)\n";

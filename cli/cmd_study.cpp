@@ -175,8 +175,8 @@ int study(const StudyArgs& a) {
     // stable step: friction's dissipation can hide the growth for a while.
     const double critical = p.friction ? s.critical_factor_full : s.critical_factor_frictionless;
     const bool past = critical > 0.0 && p.dt_factor > critical * (1.0 + 1e-9);
-    past_shown = past_shown || (p.ok && past);
     const bool blew = p.ok && calibrate::timestep_failed(p, s.tolerance);
+    past_shown = past_shown || (p.ok && past && !blew);
     failed_shown = failed_shown || blew;
     if (p.ok)
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19.3e  %10.2e +- %8.2e  %12.3e  %s\n",

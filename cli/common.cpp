@@ -6,11 +6,11 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <optional>
-#include <fcntl.h>
-#include <cstring>
 #include <unistd.h>
 
 namespace demcal::cli {
@@ -219,11 +219,12 @@ void require_writable_file(const std::string& flag, const std::string& file) {
   if (std::filesystem::is_directory(file)) throw jobs::JobError(flag, file + " is a folder, not a file");
   // access() says yes to root whatever the file system takes (/proc, a read-only
   // mount): a file made and removed there says what the writer will find.
-  const std::string probe = (parent / (".demcal-probe-" + std::to_string(::getpid()))).string();
-  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+  std::string probe = (parent / ".demcal-probe-XXXXXX").string();
+  const int fd = ::mkstemp(probe.data());
+  const int err = errno;
   if (fd < 0)
     throw jobs::JobError(flag, "cannot write into the folder " + parent.string() + " (for " + file + "): " +
-                                   std::strerror(errno));
+                                   std::strerror(err));
   ::close(fd);
   ::unlink(probe.c_str());
 }

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -59,6 +60,28 @@ nlohmann::json parse_checking_duplicates(const std::string& text) {
   return j;
 }
 
+// Where the number `literal` stands in `text` as a value, not inside a string (a
+// description may mention it) nor as part of a longer number; npos if nowhere.
+std::size_t find_number(const std::string& text, const std::string& literal) {
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+      continue;
+    }
+    const bool starts = (i == 0 || std::strchr(":[, \t\r\n", text[i - 1])) && text.compare(i, literal.size(), literal) == 0;
+    const std::size_t end = i + literal.size();
+    if (starts && (end == text.size() || std::strchr(",]} \t\r\n", text[end]))) return i;
+  }
+  return std::string::npos;
+}
+
 // "LINE:COL" (from 1) of byte `at` of `text`.
 std::string line_col(const std::string& text, std::size_t at) {
   std::size_t line = 1, col = 1;
@@ -92,7 +115,7 @@ nlohmann::json parse_text(const std::string& text, const std::string& source) {
     if (what.rfind("[json.exception.", 0) == 0 && what.find("] ") != std::string::npos)
       what = what.substr(what.find("] ") + 2);
     const auto a = what.find('\''), b = a == std::string::npos ? a : what.find('\'', a + 1);
-    const std::size_t at = b == std::string::npos ? std::string::npos : text.find(what.substr(a + 1, b - a - 1));
+    const std::size_t at = b == std::string::npos ? std::string::npos : find_number(text, what.substr(a + 1, b - a - 1));
     throw JobError("", source + (at == std::string::npos ? "" : ":" + line_col(text, at)) + ": malformed JSON: " + what +
                            " (numbers must be finite)");
   }

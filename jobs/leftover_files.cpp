@@ -27,17 +27,18 @@ bool all_digits(const std::string& s) {
 std::string result_file_tag(const std::string& name) {
   static const std::string head = ".task-";
   std::string rest;
-  if (ends_with(name, ".result.json")) rest = name.substr(0, name.size() - 12);
-  else if (ends_with(name, ".result.json.tmp")) rest = name.substr(0, name.size() - 16);
+  for (const std::string tail : {".result.json", ".result.json.tmp"})
+    if (ends_with(name, tail)) rest = name.substr(0, name.size() - tail.size());
   if (rest.compare(0, head.size(), head) != 0) return "";
   const auto dot = rest.find('.', head.size());
   if (dot == std::string::npos || !all_digits(rest.substr(head.size(), dot - head.size()))) return "";
   return rest.substr(dot + 1);
 }
 
-// "NAME.HOST-PID.part" written on this host: PID, else "".
+// "NAME.HOST-PID.part" written in this host's pid namespace (HOST is
+// process_host_tag()): PID, else "" (another namespace's pids are not ours to judge).
 std::string part_file_pid(const std::string& name) {
-  const std::string mid = "." + hostname() + "-";
+  const std::string mid = "." + process_host_tag() + "-";
   if (!ends_with(name, ".part")) return "";
   const std::string stem = name.substr(0, name.size() - 5);
   const auto at = stem.rfind(mid);
@@ -63,7 +64,8 @@ int remove_leftovers_of_dead_runners(const std::filesystem::path& dir, db::Store
       dead = tag != own_tag && t != token_of_tag.end() && !holder_alive(store, t->second, watch);
     } else if (const std::string pid = part_file_pid(name); !pid.empty()) {
       // The worker that wrote it, a child of its runner, dies with it (PDEATHSIG); a
-      // zombie until reaped, which may be after the next run starts.
+      // zombie until reaped, which may be after the next run starts. (Ten digits and
+      // more is no pid of ours, and could overflow stol.)
       dead = pid.size() < 10 && !process_alive_here(std::stol(pid));
     }
     std::error_code rm;

@@ -14,10 +14,12 @@ namespace demcal::jobs {
 
 class BeatWatch;
 
-// Removes from `dir` the leftovers of runners that `store`'s heartbeats and this
-// host's processes say are gone; files of live runners (this one, `own_tag`, another
-// run of the job on this or another host) and of writers it cannot judge (a part
-// of another host, a runner it has no token of) are kept. Returns how many it removed.
+// Removes from `dir` the leftovers of runners that are gone: on this host (and pid
+// namespace) by their processes, elsewhere by their heartbeats as `watch` has seen
+// them (a watch new to a runner believes it alive for kRunnerConfirmS: a run sweeps
+// again on its timer). Files of live runners (this one, `own_tag`, another run of the
+// job) and of writers it cannot judge (a part written in another namespace or host, a
+// runner it has no token of) are kept. Returns how many it removed.
 int remove_leftovers_of_dead_runners(const std::filesystem::path& dir, db::Store& store, const std::string& own_tag,
                                      BeatWatch* watch);
 

@@ -84,6 +84,12 @@ bool process_alive(const Token& t) {
 
 }  // namespace
 
+std::string process_host_tag() {
+  std::string tag = host();
+  std::replace(tag.begin(), tag.end(), '/', '-');
+  return tag;
+}
+
 bool process_alive_here(long pid) {
   char state = 0;
   std::string start;

@@ -48,6 +48,9 @@ class BeatWatch {
 
 std::string runner_token();  // this process
 bool process_alive_here(long pid);  // a process of this host's pid namespace, not a zombie
+// This hostname and pid namespace as part of a file name ("vm-pidns4026531836"): the
+// processes whose pids process_alive_here can judge.
+std::string process_host_tag();
 std::string hostname();      // this machine's name, for tokens, part files and lock files
 // Alive as far as this process can tell: a runner on this host by its process (gone,
 // a zombie, or a recycled pid: dead); one on another host by its heartbeat in `store`

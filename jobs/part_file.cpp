@@ -15,7 +15,9 @@ PartFile::PartFile(std::string path) : path_(std::move(path)), part_(path_ + ".p
 PartFile::PartFile(std::string path, std::string part) : path_(std::move(path)), part_(std::move(part)) {}
 
 PartFile PartFile::private_to_this_process(std::string path) {
-  std::string part = path + "." + hostname() + "-" + std::to_string(::getpid()) + ".part";
+  // The pid namespace in the name too: a later run judges the writer gone by its pid
+  // (leftover_files), which only a process of the same namespace can.
+  std::string part = path + "." + process_host_tag() + "-" + std::to_string(::getpid()) + ".part";
   return PartFile(std::move(path), std::move(part));
 }
 

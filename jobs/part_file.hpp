@@ -33,7 +33,7 @@ class PartFile {
  public:
   // `part` is where the writer writes; by default `path` + ".part".
   explicit PartFile(std::string path);
-  // A part no other process writes: `path` + ".<host>-<pid>.part". For files that
+  // A part no other process writes: `path` + ".<host>-pidns<n>-<pid>.part". For files that
   // two runs may write at once (the same task in two databases sharing a folder).
   static PartFile private_to_this_process(std::string path);
   PartFile(std::string path, std::string part);

@@ -62,9 +62,9 @@ nlohmann::json where_value(const ResultRow& r, const std::string& key) {
   return v.is_null() ? param_value(r, key) : v;
 }
 
-// Tables round metrics to 6 digits for reading, and parameters to 12 (the digits a
-// job file may tell two grid values apart by, validate's duplicate check); CSV keeps
-// every digit for further work.
+// Tables round metrics to 6 digits for reading, and parameters to 13: validate
+// refuses grid values within 1e-12 of each other, and any two further apart differ in
+// the 13th digit. CSV keeps every digit for further work.
 std::string num(double v, bool precise = false, int digits = 6) {
   if (std::isnan(v)) return "";
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
@@ -77,7 +77,7 @@ std::string num(double v, bool precise = false, int digits = 6) {
 std::string param_cell(const nlohmann::json& v, bool precise) {
   if (v.is_null()) return "";
   if (v.is_string()) return v.get<std::string>();
-  if (v.is_number_float()) return num(v.get<double>(), precise, 12);
+  if (v.is_number_float()) return num(v.get<double>(), precise, 13);
   return v.dump();
 }
 
@@ -512,14 +512,13 @@ ResultFilesFound locate_result_files(std::vector<ResultRow>& rows, const std::st
     for (std::string* path : {&r.hdf5, &r.xdmf}) {
       if (path->empty()) continue;
       const std::optional<std::string> now = find_moved_result(*path, db);
-      if (!now) {
-        missing = true;
-      } else if (*now != *path) {
+      missing = missing || !now;
+      if (now && *now != *path) {
         *path = *now;
         moved = true;
       }
     }
-    n.moved += moved && !missing;
+    n.moved += moved;
     n.missing += missing;
   }
   return n;

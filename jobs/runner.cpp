@@ -449,7 +449,7 @@ RunSummary Runner::run_loop() {
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
   auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh, last_file_check = last_refresh,
-       last_counts = last_refresh;
+       last_counts = last_refresh, last_swept = last_refresh;
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
     while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal() &&
@@ -476,6 +476,15 @@ RunSummary Runner::run_loop() {
       if (int n = requeue_dead_runners(store_, &beats_)) {
         progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", read_counts());
         requeued = true;
+      }
+      // Another host's runner is judged dead only once its silence has been watched
+      // (kRunnerConfirmS): its files go then, not at this run's start.
+      if (requeued || now - last_swept > std::chrono::duration<double>(kRunnerBeatS)) {
+        last_swept = now;
+        if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
+          progress_.line("removed " + std::to_string(n) + " partial file(s) left in " + dir_.string() +
+                             "/ by runners that are gone",
+                         read_counts());
       }
     }
     if (now - last_file_check > std::chrono::seconds(2)) {

@@ -169,12 +169,12 @@ void resolve(nlohmann::json& p, const std::string& fidelity) {
   if (p["shear_ramp_strain"].get<double>() >= 0.5 * eps1)
     throw JobError("triaxial.shear_ramp_strain", num(p["shear_ramp_strain"]) +
                                                      (p["shear_ramp_strain"] == engine::TriaxialConfig{}.shear_ramp_strain
-                                                          ? " (its default)"
+                                                          ? " (the default)"
                                                           : "") +
                                                      " must be below half of triaxial.axial_strain (" +
                                                      num(p["axial_strain"]) +
-                                                     "): the shear ramps its rate up over that much strain; a longer "
-                                                     "axial_strain or a shorter shear_ramp_strain");
+                                                     "): the shear ramps its rate up over that much strain; give a "
+                                                     "longer axial_strain or a shorter shear_ramp_strain");
   try {
     config_from(p).validate();
   } catch (const engine::ConfigError& e) {

@@ -522,6 +522,13 @@ TEST(CalibrateCli, FitRefusesWhatCannotGiveAnHonestRegion) {
   EXPECT_NE(r.err.find("--target: \"phi_peak\" and \"phi_peak_deg\" are the same stored metric (phi_peak_deg)"),
             std::string::npos)
       << r.err;
+  // Two readings of one peak (raw and smoothed) are one sample's error, not two.
+  r = run_demcal({"fit", "--target", "phi_peak=35", "--target", "phi_cv=28", "--target", "phi_peak_smoothed_deg=34"},
+                 d2.path.string());
+  EXPECT_EQ(r.rc, 2) << r.out;
+  EXPECT_NE(r.err.find("--target: \"phi_peak\" and \"phi_peak_smoothed_deg\" read the same angle of the same runs"),
+            std::string::npos)
+      << r.err;
 }
 
 TEST(CalibrateCli, FitSearchesOnlyWhereThereIsDataAndNamesGaps) {
@@ -840,8 +847,10 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   const std::string db = d.file("demcal.db");
   std::int64_t failed = 0, warned = 0;
   std::string shifted;  // the point whose peaks all rise by 50 kPa: a line with an intercept
+  std::string lowered;  // and one whose peaks all fall by 30 kPa: a negative intercept, a tension
   for (const auto& t : db::Store(db, true).tasks("mc")) {
     const auto q = nlohmann::json::parse(t.params_json);
+    if (q["theta_deg"] == 20 && q["eta"] == 0.2) lowered += (lowered.empty() ? "" : ", ") + std::to_string(t.id);
     if (q["theta_deg"] == 20 && q["eta"] == 0.1 && q["confining_kpa"] == 50.0) failed = t.id;
     if (q["theta_deg"] == 30 && q["eta"] == 0.2) {
       shifted += (shifted.empty() ? "" : ", ") + std::to_string(t.id);
@@ -851,7 +860,8 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   sql(db, "UPDATE tasks SET status = 'failed', error = 'invalid in stage shear: the lateral walls lost sigma3' WHERE id = " +
               std::to_string(failed) + "; UPDATE tasks SET error = 'warning: not quasi-static: fast' WHERE id = " +
               std::to_string(warned) + "; UPDATE metrics SET value = value + 50000 WHERE name = 'q_peak_pa' AND task_id IN (" +
-              shifted + ")");
+              shifted + "); UPDATE metrics SET value = value - 30000 WHERE name = 'q_peak_pa' AND task_id IN (" +
+              lowered + ")");
   const auto bad = run_demcal({"envelope", "--job", "mc"}, d.path.string());
   ASSERT_EQ(bad.rc, 0) << bad.err;
   EXPECT_NE(bad.out.find("left out at theta 20, eta 0.1: 50 kPa: task " + std::to_string(failed) +
@@ -860,6 +870,8 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
       << bad.out;
   EXPECT_NE(bad.out.find("warning: 1 of the 11 peaks used carry warnings"), std::string::npos) << bad.out;
   EXPECT_NE(bad.out.find("warning: theta 30, eta 0.2: cohesion "), std::string::npos) << bad.out;
+  EXPECT_NE(bad.out.find("warning: theta 20, eta 0.2: cohesion -"), std::string::npos) << bad.out;
+  EXPECT_NE(bad.out.find("a negative c is a tension"), std::string::npos) << bad.out;
   // One pressure only: an error, and no table of rows that all say so.
   const auto one = run_demcal({"envelope", "--job", "mc50"}, d.path.string());
   EXPECT_EQ(one.rc, 2);

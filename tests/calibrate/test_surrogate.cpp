@@ -105,6 +105,9 @@ TEST(Metric, AStoredMetricIsLabelledWithTheUnitItsNameEndsWith) {
   EXPECT_EQ(demcal::calibrate::metric_spec("phi_cv_se_deg").label, "phi_cv_se_deg (deg)");
   EXPECT_EQ(demcal::calibrate::metric_spec("q_peak_pa").unit, "Pa");
   EXPECT_EQ(demcal::calibrate::metric_spec("wall_s").unit, "s");
+  EXPECT_EQ(demcal::calibrate::metric_spec("drift_per_simulated_s").unit, "1/s");
+  EXPECT_EQ(demcal::calibrate::metric_spec("particle_steps_per_s").unit, "1/s");
+  EXPECT_EQ(demcal::calibrate::metric_spec("wall_s_per_simulated_s").unit, "");
   EXPECT_EQ(demcal::calibrate::metric_spec("porosity_final").label, "porosity_final");
   EXPECT_EQ(demcal::calibrate::metric_spec("porosity_final").unit, "");
 }

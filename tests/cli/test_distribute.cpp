@@ -277,6 +277,15 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
   EXPECT_NE(slurp(d.file("rel.sh")).find("DEMCAL='" + fs::canonical(d.file("sub/demcal")).string() + "'"), std::string::npos);
 }
 
+TEST(Distribute, AnMpiTimeoutWithoutMpiIsRefused) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("t", {0.1}));
+  const Result r = run_demcal({"run", "j.json", "--mpi-timeout", "5"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--mpi-timeout: applies to an MPI run only"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d.file("demcal.db")));
+}
+
 #ifndef DEMCAL_HAVE_MPI
 TEST(Distribute, MpiFlagInABuildWithoutMpiSaysSo) {
   TempDir d;
@@ -329,6 +338,15 @@ TEST(Distribute, AFailedShardsHintRepeatsItsShardAndOutput) {
   // The part holds half the job, and status says so (its own counts look complete).
   const Result st = run_demcal({"status", "--db", "p2.db"}, d.path.string());
   EXPECT_NE(st.out.find("fl: 1 of the job file's 2 task(s) are not in this database"), std::string::npos) << st.out;
+  // Merged, the failed task is said, not only counted among what was taken.
+  ASSERT_EQ(run_demcal({"run", "j.json", "--db", "p1.db", "--shard", "1/2", "--out", "o1"}, d.path.string()).rc, 0);
+  const Result m = run_demcal({"merge", "p1.db", "p2.db", "--into", "all.db"}, d.path.string());
+  EXPECT_EQ(m.rc, 0) << m.err;
+  EXPECT_NE(m.out.find("job fl in all.db has tasks without a result: 1 failed (demcal status --db all.db says why"),
+            std::string::npos)
+      << m.out;
+  const Result clean = run_demcal({"merge", "p1.db", "--into", "one.db"}, d.path.string());
+  EXPECT_EQ(clean.out.find("without a result"), std::string::npos) << clean.out;
 }
 
 }  // namespace

@@ -151,6 +151,10 @@ TEST(Validation, NonFiniteNumbersRejected) {
   const std::size_t line = 1 + static_cast<std::size_t>(std::count(text.begin(), text.begin() + at, '\n'));
   const std::size_t col = at - text.rfind('\n', at);
   EXPECT_EQ(msg.rfind("job.json:" + std::to_string(line) + ":" + std::to_string(col) + ": ", 0), 0u) << msg;
+  // The literal in a string (a description) is not the value that overflowed.
+  const std::string quoted = error_of("{\"name\": \"x\", \"description\": \"kn 1e999, 1e999\", \"scene\": \"collision\",\n"
+                                      "  \"material\": {\"kn\": 1e999}}");
+  EXPECT_EQ(quoted.rfind("job.json:2:22: ", 0), 0u) << quoted;
   EXPECT_NE(msg.find("finite"), std::string::npos) << msg;
   EXPECT_NE(error_of("{\"name\": \"x\", \"scene\": \"collision\", \"material\": {\"kn\": NaN}}"), "");
 }
