@@ -58,6 +58,13 @@ json repose_base() {
 
 Job parse(const json& j) { return parse_job(j.dump(), "test.json"); }
 
+// Every note the job draws, one a line.
+std::string notes_of(const json& j) {
+  std::string all;
+  for (const auto& n : parse(j).notes) all += n + "\n";
+  return all;
+}
+
 std::string error_of(const json& j) {
   try {
     parse(j);
@@ -76,11 +83,6 @@ Job example(const char* name) { return demcal::jobs::load_job_file(std::string(D
 // A loose sample has no frictionless stage: the scale changes its key and nothing else.
 TEST(TriaxialReposeScenes, FrictionlessStepScaleOnALooseSampleIsNotedUnused) {
   const char* note = "triaxial.frictionless_dt_scale is not used: a loose sample has no frictionless stage";
-  auto notes_of = [](const json& j) {
-    std::string all;
-    for (const auto& n : parse(j).notes) all += n + "\n";
-    return all;
-  };
   json j = triaxial_base();
   j["triaxial"]["frictionless_dt_scale"] = 1.0;
   EXPECT_EQ(notes_of(j).find(note), std::string::npos) << notes_of(j);  // dense: used
@@ -95,11 +97,6 @@ TEST(TriaxialReposeScenes, FrictionlessStepScaleOnALooseSampleIsNotedUnused) {
 // with density_scale it is used, and not noted.
 TEST(TriaxialReposeScenes, ADensityThatScaledDensityOverridesIsNotedUnused) {
   const std::string note = "material.density (2600 kg/m^3) is not used: the grains' density is triaxial.scaled_density";
-  auto notes_of = [](const json& j) {
-    std::string all;
-    for (const auto& n : parse(j).notes) all += n + "\n";
-    return all;
-  };
   json j = triaxial_base();  // density_scale 1e9: the density is used
   j["material"]["density"] = 2600;
   EXPECT_EQ(notes_of(j).find("material.density ("), std::string::npos) << notes_of(j);
@@ -492,11 +489,6 @@ TEST(TriaxialReposeScenes, ANotQuasiStaticShearIsNotedBeforeTheRun) {
 // load the stiffness cannot carry, walls too slow to pack the grains within the
 // budget, a step close to the critical one.
 TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
-  auto notes_of = [](const json& j) {
-    std::string all;
-    for (const auto& n : parse(j).notes) all += n + "\n";
-    return all;
-  };
   const json base = triaxial_base();
   const std::string plain = notes_of(base);
   for (const char* what :
@@ -768,11 +760,6 @@ TEST(TriaxialReposeScenes, QuickReposeTaskRunsThroughTheRunner) {
 // Rows every sample_steps steps replace rows every sample_strain: a grid over
 // sample_strain with sample_steps set runs the same series under several keys. Noted.
 TEST(TriaxialReposeScenes, ASampleStrainThatSampleStepsOverridesIsNotedUnused) {
-  auto notes_of = [](const json& j) {
-    std::string all;
-    for (const auto& n : parse(j).notes) all += n + "\n";
-    return all;
-  };
   json j = triaxial_base();
   j["triaxial"]["sample_strain"] = 0.005;
   EXPECT_EQ(notes_of(j).find("sample_strain"), std::string::npos) << notes_of(j);  // used
@@ -788,11 +775,6 @@ TEST(TriaxialReposeScenes, ASampleStrainThatSampleStepsOverridesIsNotedUnused) {
 // theta_deg defaults to 0: a repose job that leaves it out asks for frictionless
 // grains, which heap nothing. Noted, and eta's uselessness with it.
 TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
-  auto notes_of = [](const json& j) {
-    std::string all;
-    for (const auto& n : parse(j).notes) all += n + "\n";
-    return all;
-  };
   json j = repose_base();
   EXPECT_EQ(notes_of(j).find("theta_deg is 0"), std::string::npos) << notes_of(j);
   j["material"].erase("theta_deg");
