@@ -44,7 +44,7 @@ struct TaskFileInfo {
 // Root attributes: scene, params (JSON), task_key, task_id, status, message (when
 // any) and physics_version; each
 // series column and snapshot dataset carries a "units" attribute (SI; "1" for a pure
-// number). Written to a part of this process's own (`path`.<host>-<pid>.part) and
+// number). Written to a part of this process's own (`path`.<host>-pidns<n>-<pid>.part) and
 // renamed into place when whole; throws OutputWriteError naming the path and the
 // reason when it cannot be written (the runner stops on it).
 void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nlohmann::json& params,

@@ -3,6 +3,7 @@
 #include "decimal.hpp"
 
 #include "job_error.hpp"
+#include "hdf5_writer.hpp"
 #include "moved_results.hpp"
 #include "params.hpp"
 #include "scene_registry.hpp"
@@ -511,7 +512,18 @@ ResultFilesFound locate_result_files(std::vector<ResultRow>& rows, const std::st
     bool moved = false, missing = false;
     for (std::string* path : {&r.hdf5, &r.xdmf}) {
       if (path->empty()) continue;
-      const std::optional<std::string> now = find_moved_result(*path, db);
+      std::optional<std::string> now = find_moved_result(*path, db);
+      // A file found by its tail must be this task's (a folder shared with another
+      // database holds files of the same name), as plot checks before drawing.
+      if (now && *now != *path && path == &r.hdf5) {
+        std::string key;
+        try {
+          key = read_task_key(*now);
+        } catch (const std::exception&) {
+          key = "unreadable";
+        }
+        if (!key.empty() && key != r.task.key) now.reset();
+      }
       missing = missing || !now;
       if (now && *now != *path) {
         *path = *now;

@@ -657,6 +657,17 @@ TEST(Cli, PlotSaysATaskFailedAndFollowsAMovedResultsFolder) {
   EXPECT_NE(r.err.find("note: result files of 1 task(s) are not where the database recorded them"),
             std::string::npos)
       << r.err;
+  // Another task's file under that name is no find: read by its key, it is missing.
+  const std::string found = nlohmann::json::parse(r.out)[0]["hdf5"].get<std::string>();
+  fs::path other;
+  for (const auto& e : fs::directory_iterator(d.path / "b" / "demcal-out" / "guard"))
+    if (e.path().extension() == ".h5") other = e.path();
+  ASSERT_FALSE(other.empty());
+  fs::copy_file(found, d.file("deep.h5"));
+  fs::copy_file(other, found, fs::copy_options::overwrite_existing);
+  r = run_demcal({"query", "--db", "e/m.db", "--format", "json"}, d.path.string());
+  EXPECT_NE(r.err.find("note: result files of 1 task(s) are missing"), std::string::npos) << r.err;
+  fs::copy_file(d.file("deep.h5"), found, fs::copy_options::overwrite_existing);
   fs::remove_all(d.path / "e" / "parts");
   r = run_demcal({"query", "--db", "e/m.db", "--format", "json"}, d.path.string());
   EXPECT_NE(r.err.find("note: result files of 1 task(s) are missing"), std::string::npos) << r.err;
