@@ -19,6 +19,12 @@
 namespace demcal::calibrate {
 namespace {
 
+// " deg" after a value of `metric` (its unit from its name), "" for a pure number.
+std::string unit_suffix(const std::string& metric) {
+  const std::string unit = metric_spec(metric).unit;
+  return unit.empty() ? "" : " " + unit;
+}
+
 using jobs::JobError;
 
 std::string g(double v, int digits = 4) {
@@ -263,6 +269,20 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                                 " (at " + where(box, t.theta_at_lo, t.eta_at_lo) + "; sigma " + g(t.sigma, 2) +
                                 "); extend the grid beyond that bound");
   }
+  // Beyond the grid's values but within reach of its sigma: the fit goes on, and its
+  // answer is only where the grid's values end (a repose target 3.7 above the grid's
+  // highest angle, inside 2 sigma, read as matched).
+  for (const auto& t : res.targets) {
+    const bool above = t.target > t.hi, below = t.target < t.lo;
+    if ((above || below) && std::abs(t.target - (above ? t.hi : t.lo)) <= opt.reach_sigmas * t.sigma)
+      res.warnings.push_back(t.metric + " = " + g(t.target) + " is " + (above ? "above" : "below") +
+                             " anything the grid reaches (" + (above ? "at most " : "at least ") +
+                             g(above ? t.hi : t.lo) + unit_suffix(t.metric) + ", at " +
+                             where(box, above ? t.theta_at_hi : t.theta_at_lo, above ? t.eta_at_hi : t.eta_at_lo) +
+                             "), within " + g(opt.reach_sigmas) + " sigma (" + g(t.sigma, 2) +
+                             "): the answer lies where the grid's values end, not where the target is met; extend "
+                             "the grid beyond that bound");
+  }
 
   res.correlations = correlations;
   Misfit misfit{&models, values, {}, {}, counted_pairs(models, res)};
@@ -410,11 +430,11 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
       const double dth = (s(t0 + ht, e0) - s(t0 - ht, e0)) / (2 * ht) * wt * 0.25;
       const double det = (s(t0, e0 + he2) - s(t0, e0 - he2)) / (2 * he2) * we * 0.25;
       if (std::abs(dth) < res.targets[k].sigma)
-        res.warnings.push_back(res.targets[k].metric + " is nearly flat in theta near the best point (changes by " + g(dth, 2) +
+        res.warnings.push_back(res.targets[k].metric + " is nearly flat in theta near the best point (changes by " + g(dth, 2) + unit_suffix(res.targets[k].metric) +
                                " over a quarter of the theta range, less than its sigma " + g(res.targets[k].sigma, 2) +
                                "): it cannot pin theta there");
       if (std::abs(det) < res.targets[k].sigma)
-        res.warnings.push_back(res.targets[k].metric + " is nearly flat in eta near the best point (changes by " + g(det, 2) +
+        res.warnings.push_back(res.targets[k].metric + " is nearly flat in eta near the best point (changes by " + g(det, 2) + unit_suffix(res.targets[k].metric) +
                                " over a quarter of the eta range, less than its sigma " + g(res.targets[k].sigma, 2) +
                                "): it cannot pin eta there");
     }

@@ -207,13 +207,15 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     bool refine;
   };
   std::vector<Row> rows;
-  for (auto& r : jobs::select_rows(store, job, opt.where)) rows.push_back({std::move(r), false});
+  std::string why_none;  // the filter that matched nothing, and the values its key takes
+  for (auto& r : jobs::select_rows(store, job, opt.where, &why_none)) rows.push_back({std::move(r), false});
   if (opt.include_refine)
     for (const auto& sub : refine_jobs_of(store, job))
       for (auto& r : jobs::select_rows(store, sub, opt.where)) rows.push_back({std::move(r), true});
   if (rows.empty())
     throw JobError(opt.where.empty() ? "--job" : "--where",
-                   "no data: job \"" + job + "\" has no tasks" + (opt.where.empty() ? "" : " matching the filters"));
+                   "no data: job \"" + job + "\" has no tasks" +
+                       (opt.where.empty() ? "" : " matching the filters" + (why_none.empty() ? "" : ": " + why_none)));
 
   // A stored metric nobody has is an unknown metric, not missing data. Nobody: no task
   // of the job, filtered or not (the filters may select only tasks that lack it).

@@ -114,6 +114,11 @@ double Grading::curve_finer(double d) const {
   return curve.finer[i - 1] + t * (curve.finer[i] - curve.finer[i - 1]);
 }
 
+std::pair<double, double> Grading::mass_cut() const {
+  if (curve.empty()) return {0.0, 0.0};
+  return {curve_finer(d_min), 1.0 - curve_finer(d_max)};
+}
+
 std::vector<Grading::Piece> Grading::pieces() const {
   if (curve.empty() || d_max <= d_min) return {{d_min, d_max, 1.0, 1.0}};
   std::vector<double> at{d_min};

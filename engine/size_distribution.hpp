@@ -46,6 +46,9 @@ struct Grading {
   double mean() const;                      // number mean of d
   double mean_cube() const;                 // number mean of d^3 (mean grain volume = pi/6 of it)
   double finer_by_mass(double d) const;     // fraction of the mass in grains smaller than d
+  // Of a curve's mass, the fractions below d_min and above d_max that the cut leaves
+  // out of the sample (0, 0 without a curve).
+  std::pair<double, double> mass_cut() const;
 
   // Between two neighbouring sizes of the curve (or the range's ends) the grading is
   // `kind` over that interval: `mass` is its share of the mass, `number` its share of

@@ -5,6 +5,8 @@
 #include "scene_registry.hpp"
 
 #include <algorithm>
+#include <iomanip>
+#include <sstream>
 
 namespace demcal::jobs {
 
@@ -15,6 +17,17 @@ void resolve_time_step(nlohmann::json& p, const std::string& section, double def
 
 void erase_default(nlohmann::json& p, const std::string& key, const nlohmann::json& value) {
   if (p.contains(key) && p[key] == value) p.erase(key);
+}
+
+std::string grading_cut_note(const engine::Grading& g) {
+  const auto [below, above] = g.mass_cut();
+  if (below + above <= 0.2) return "";
+  std::ostringstream os;
+  os << std::setprecision(3) << "material.diameter min and max (" << g.d_min << ", " << g.d_max
+     << " m) keep " << 100.0 * (1.0 - below - above) << "% of the grading curve's mass (" << 100.0 * below
+     << "% is finer than min, " << 100.0 * above << "% coarser than max): the sample is the curve's middle, not "
+     << "the sand; a wider range keeps more, at the price of a smaller step (the smallest grain sets it)";
+  return os.str();
 }
 
 void resolve_diameters(nlohmann::json& p) {

@@ -2,6 +2,7 @@
 // What every scene's resolve() shares: the time-step pair, the diameter range and
 // the engine's own validation turned into a job-file error.
 #include "engine/errors.hpp"
+#include "engine/size_distribution.hpp"
 
 #include <nlohmann/json.hpp>
 #include <string>
@@ -17,6 +18,11 @@ void resolve_time_step(nlohmann::json& params, const std::string& section, doubl
 // the default and is dropped, so that a job that writes it out keeps the keys (and
 // the --where matches) of one that leaves it out; a curve must make a grading.
 void resolve_diameters(nlohmann::json& params);
+
+// A note when min and max cut a grading curve to less than 80% of its mass: the
+// sample is the curve's middle, not the sand (its share of fines and of coarse grains
+// is gone); "" otherwise.
+std::string grading_cut_note(const engine::Grading& g);
 
 // Drops `key` when it holds `value` (numbers compared by value, 0 == 0.0): a default
 // written out keeps the task key, and the --where matches, of a job that leaves it out.

@@ -200,6 +200,8 @@ std::string advice(const nlohmann::json& p) {
        << " s): a heap whose rattlers keep the kinetic energy above the threshold will fail not_settled; raise "
           "repose.time_limit above "
        << c.profile_check_time() << " s, or set repose.rest_profile_window to 0 to do without the check";
+  if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty())
+    os << (os.tellp() > 0 ? "; " : "") << cut;
   // theta_deg defaults to 0, so a job that forgets it asks for frictionless grains:
   // they spread instead of heaping (a repose column at eta 0.1 was still flowing at
   // its 1.5 s limit), and with no tangential force nothing turns a grain for eta to resist.

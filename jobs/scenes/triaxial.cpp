@@ -317,6 +317,7 @@ std::string advice(const nlohmann::json& p) {
     next_note(os, 6) << "material.density (" << c.material.density
        << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
        << " kg/m^3); triaxial.density_scale scales material.density instead";
+  if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 3) << cut;
   // Rows every sample_steps steps replace rows every sample_strain of strain: tasks
   // that differ only in sample_strain then store the same series under different keys.
   if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)

@@ -134,6 +134,11 @@ TEST(CalibrateStore, APointShortOfReplicasAndANodeWithoutTasksAreSaid) {
   EXPECT_NE(r.err.find("--metric: no data: none of job \"grid\"'s 35 selected tasks has a stored phi_cv_deg"),
             std::string::npos)
       << r.err;
+  // A filter no task matches names the values its key takes.
+  r = run_demcal({"map", "--metric", "phi_cv", "--where", "seed=99", "--out", "n.svg"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("has no tasks matching the filters: seed=99 matches no task; seed takes "), std::string::npos)
+      << r.err;
 }
 
 // A map of one pressure draws the fit made on that pressure, never another's: a fit

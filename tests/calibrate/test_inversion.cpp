@@ -188,6 +188,24 @@ TEST(Inversion, UnreachableTargetNamesTheMetricAndTheBound) {
   EXPECT_FALSE(fit.to_json().contains("theta_deg"));
 }
 
+// Beyond the grid's values, but within reach of its sigma: an answer, on the grid's
+// edge, with a warning that the target is not met there (a repose target 3.7 deg above
+// the grid's highest angle, 1.5 sigma, read as matched without a word).
+TEST(Inversion, ATargetJustBeyondTheGridIsAnsweredWithAWarning) {
+  std::mt19937_64 rng(5);
+  const auto pk = synthetic_surface(phi_peak_fn, 0.3, 2, rng, "phi_peak");
+  const double top = phi_peak_fn(kBox.theta_hi, kBox.eta_hi);
+  const auto fit = calibrate::invert({model_of(pk)}, {{"phi_peak", top + 0.8, 1.0}}, kBox);
+  ASSERT_TRUE(fit.ok) << (fit.unreachable.empty() ? "" : fit.unreachable.front());
+  bool said = false;
+  for (const auto& w : fit.warnings)
+    said = said || (w.rfind("phi_peak = ", 0) == 0 && w.find(" is above anything the grid reaches (at most ") != std::string::npos &&
+                    w.find(" deg, at ") != std::string::npos);
+  EXPECT_TRUE(said);
+  const auto inside = calibrate::invert({model_of(pk)}, {{"phi_peak", top - 3.0, 1.0}}, kBox);
+  for (const auto& w : inside.warnings) EXPECT_EQ(w.find("anything the grid reaches"), std::string::npos) << w;
+}
+
 TEST(ReplicaCorrelation, PoolsTheDeviationsOfReplicasPairedByTask) {
   calibrate::ResponseSurface a, b;
   a.job = b.job = "j";

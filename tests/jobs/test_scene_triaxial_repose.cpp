@@ -786,3 +786,23 @@ TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
   EXPECT_NE(notes.find("#1: material.theta_deg is 0"), std::string::npos) << notes;
   EXPECT_NE(notes.find("and material.eta exerts no moment without friction"), std::string::npos) << notes;
 }
+
+// min and max that cut a grading curve to half its mass: the sample is the curve's
+// middle, not the sand. Noted with the shares left out; a mild cut is not.
+TEST(TriaxialReposeScenes, AGradingCutToLessThanMostOfItsMassIsNoted) {
+  json j = triaxial_base();
+  j["material"]["diameter"] = {{"grading", {{"d", {0.0002, 0.00025, 0.00045, 0.0008, 0.001}},
+                                            {"percent_finer", {0, 10, 50, 90, 100}}}},
+                               {"min", 0.0004}, {"max", 0.0008}};
+  EXPECT_NE(notes_of(j).find("material.diameter min and max (0.0004, 0.0008 m) keep 48"), std::string::npos)
+      << notes_of(j);
+  EXPECT_NE(notes_of(j).find("% is finer than min, 10% coarser than max"), std::string::npos) << notes_of(j);
+  j["material"]["diameter"]["min"] = 0.00025;
+  j["material"]["diameter"]["max"] = 0.001;  // 90% kept
+  EXPECT_EQ(notes_of(j).find("of the grading curve's mass"), std::string::npos) << notes_of(j);
+  json r = repose_base();
+  r["material"]["diameter"] = j["material"]["diameter"];
+  r["material"]["diameter"]["min"] = 0.0004;
+  r["material"]["diameter"]["max"] = 0.0008;
+  EXPECT_NE(notes_of(r).find("of the grading curve's mass"), std::string::npos) << notes_of(r);
+}
