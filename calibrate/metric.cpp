@@ -21,19 +21,18 @@ bool is_alias(const std::string& name) {
 namespace {
 // The unit a stored metric's name ends with (the scenes' naming: angles *_deg,
 // stresses *_pa, times *_s); "" for a pure number (porosity, a ratio, a count).
+bool ends_with(const std::string& s, const std::string& tail) {
+  return s.size() > tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
+
 std::string unit_of(const std::string& name) {
   // A rate: drift_per_simulated_s is 1/s, wall_s_per_simulated_s a pure ratio.
   for (const std::string per : {"_per_simulated_s", "_per_s"})
-    if (name.size() > per.size() && name.compare(name.size() - per.size(), per.size(), per) == 0) {
-      const std::string top = name.substr(0, name.size() - per.size());
-      return top.size() > 2 && top.compare(top.size() - 2, 2, "_s") == 0 ? "" : "1/s";
-    }
+    if (ends_with(name, per)) return ends_with(name.substr(0, name.size() - per.size()), "_s") ? "" : "1/s";
   static const std::pair<const char*, const char*> suffixes[] = {
       {"_deg", "deg"}, {"_pa", "Pa"}, {"_kpa", "kPa"}, {"_s", "s"}, {"_j", "J"}, {"_m", "m"}};
-  for (const auto& [tail, unit] : suffixes) {
-    const std::string t(tail);
-    if (name.size() > t.size() && name.compare(name.size() - t.size(), t.size(), t) == 0) return unit;
-  }
+  for (const auto& [tail, unit] : suffixes)
+    if (ends_with(name, tail)) return unit;
   return "";
 }
 }  // namespace

@@ -2,6 +2,7 @@
 // What the study files share: the runner and gnuplot they use, checked writes of
 // their tables and charts, a stored metric by name, and numbers as the charts and
 // advice print them.
+#include "engine/format.hpp"
 #include "jobs/job_error.hpp"
 #include "jobs/job_spec.hpp"
 #include "jobs/part_file.hpp"
@@ -12,7 +13,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -82,10 +82,7 @@ inline double metric(const jobs::ResultRow& r, const std::string& name) {
   return NAN;
 }
 
-inline std::string fmt(double v, int prec = 3) {
-  std::ostringstream os;
-  os << std::setprecision(prec) << v;
-  return os.str();
-}
+// The engine's message format, at three digits unless told.
+inline std::string fmt(double v, int prec = 3) { return engine::fmt(v, prec); }
 
 }  // namespace demcal::calibrate::study_support

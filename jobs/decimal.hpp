@@ -1,6 +1,9 @@
 #pragma once
-// Numbers typed on the command line (--where, --target, --sigma).
+// Numbers typed on the command line (--where, --target, --sigma), and when two
+// numbers are one value to a reader of the results.
+#include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <string>
 
@@ -16,6 +19,12 @@ inline bool parse_decimal(const std::string& text, double& d) {
   char* end = nullptr;
   d = std::strtod(text.c_str(), &end);
   return end && *end == '\0' && end != text.c_str();
+}
+
+// Equal, or apart only past the 12th significant digit: query --where matches them as
+// one value, and a grid may not hold both.
+inline bool numbers_equal(double a, double b) {
+  return a == b || (std::isfinite(a) && std::isfinite(b) && std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)));
 }
 
 }  // namespace demcal::jobs

@@ -21,10 +21,6 @@
 namespace demcal::jobs {
 namespace {
 
-bool numbers_equal(double a, double b) {
-  return a == b || (std::isfinite(a) && std::isfinite(b) && std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)));
-}
-
 nlohmann::json special(const db::TaskRow& t, const std::string& key) {
   if (key == "status") return t.status;
   if (key == "scene") return t.scene;

@@ -19,6 +19,12 @@ void erase_default(nlohmann::json& p, const std::string& key, const nlohmann::js
   if (p.contains(key) && p[key] == value) p.erase(key);
 }
 
+std::ostream& next_note(std::ostringstream& os, int precision) {
+  if (os.tellp() > 0) os << "; ";
+  os.precision(precision);
+  return os;
+}
+
 std::string grading_cut_note(const engine::Grading& g) {
   const auto [below, above] = g.mass_cut();
   if (below + above <= 0.2) return "";

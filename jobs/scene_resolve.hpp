@@ -5,6 +5,8 @@
 #include "engine/size_distribution.hpp"
 
 #include <nlohmann/json.hpp>
+#include <ostream>
+#include <sstream>
 #include <string>
 
 namespace demcal::jobs {
@@ -18,6 +20,10 @@ void resolve_time_step(nlohmann::json& params, const std::string& section, doubl
 // the default and is dropped, so that a job that writes it out keeps the keys (and
 // the --where matches) of one that leaves it out; a curve must make a grading.
 void resolve_diameters(nlohmann::json& params);
+
+// Starts the next of a scene's advice notes in `os` (they are joined with "; "),
+// written at the significant digits it needs.
+std::ostream& next_note(std::ostringstream& os, int precision);
 
 // A note when min and max cut a grading curve to less than 80% of its mass: the
 // sample is the curve's middle, not the sand (its share of fines and of coarse grains

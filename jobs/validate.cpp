@@ -1,10 +1,10 @@
 #include "validate.hpp"
 
+#include "decimal.hpp"
 #include "job_error.hpp"
 
 #include "engine/types.hpp"
 
-#include <cmath>
 #include <algorithm>
 #include <sstream>
 
@@ -49,14 +49,6 @@ std::string unknown_key_reason(const std::string& key, const std::vector<std::st
   return reason + " (expected one of " + all + ")";
 }
 
-// Two numbers that differ past the 12th significant digit are one value written
-// twice for every reader of the results (query --where compares them so).
-bool numbers_nearly_equal(const nlohmann::json& a, const nlohmann::json& b) {
-  if (!a.is_number() || !b.is_number()) return false;
-  const double x = a.get<double>(), y = b.get<double>();
-  return std::isfinite(x) && std::isfinite(y) && std::abs(x - y) <= 1e-12 * std::max(std::abs(x), std::abs(y));
-}
-
 std::vector<nlohmann::json> check_list(const ParamSpec& spec, const nlohmann::json& list, const std::string& path) {
   if (list.empty()) throw JobError(path, "empty list: give at least one value");
   std::vector<nlohmann::json> values;
@@ -66,7 +58,7 @@ std::vector<nlohmann::json> check_list(const ParamSpec& spec, const nlohmann::js
     nlohmann::json v = check_scalar(spec, list[i], at);
     for (std::size_t j = 0; j < values.size(); ++j) {
       if (values[j] == v) throw JobError(at, "duplicate value " + v.dump() + " (also at [" + std::to_string(j) + "])");
-      if (numbers_nearly_equal(values[j], v))
+      if (values[j].is_number() && v.is_number() && numbers_equal(values[j].get<double>(), v.get<double>()))
         throw JobError(at, "duplicate value " + v.dump() + ": " + values[j].dump() + " at [" + std::to_string(j) +
                                "] is the same to 12 significant digits (query --where takes them as one)");
     }

@@ -905,8 +905,7 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
     s += " (that step is the frictionless stages' own, " + fmt(res.dt_frictionless / res.dt, 4) + " x dt, dt = " +
          fmt(res.dt) + " s: the same margin to their own critical step)";
   if (e.quantity() != "overlap") return s;
-  // Overlap of a grain pair under a mean stress p: about p d / kn of a diameter.
-  const double kappa = cfg.material.kn / (rig.target_p * cfg.material.d_min);
+  const double kappa = cfg.stiffness_number(rig.target_p);
   // The dense preparation's first stage, at its target (not ramping down from it).
   const bool at_prep_load = cfg.prep_pressure_factor != 1.0 &&
                             std::abs(rig.target_p - cfg.prep_pressure_factor * cfg.confining_pressure) <=
@@ -914,7 +913,7 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
   s += "; the stage loads the grains to " + fmt(rig.target_p) + " Pa" +
        (at_prep_load ? " (triaxial.prep_pressure_factor " + fmt(cfg.prep_pressure_factor) + " x p0)" : std::string()) +
        ", where kn / (p d_min) = " + fmt(kappa, 3);
-  if (kappa < 1000.0)
+  if (kappa < TriaxialConfig::kLowStiffnessNumber)
     s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "
          "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
          "confining_kpa, or raise material.kn";

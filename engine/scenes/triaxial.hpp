@@ -132,6 +132,12 @@ struct TriaxialConfig {
   // from the settings (d_mean of the material's grading): what the run's
   // quasi-static check will meet at least, known before it runs.
   double nominal_inertial_number() const;
+  // kn / (p d_min): about the inverse of the overlap, in smallest diameters, a mean
+  // stress p presses into a pair. Below kLowStiffnessNumber grains press deep into each
+  // other under the load alone, whatever the step (the seed's material: 3e5 at 100 kPa,
+  // 3000 in its dense preparation at 100 p0).
+  double stiffness_number(double p) const { return material.kn / (p * material.d_min); }
+  static constexpr double kLowStiffnessNumber = 1000.0;
   double grain_density() const { return density_scale > 0.0 ? material.density * density_scale : scaled_density; }
 };
 

@@ -195,18 +195,17 @@ std::string advice(const nlohmann::json& p) {
   const engine::ReposeConfig c = config_from(p);
   std::ostringstream os;
   if (c.profile_check_has_no_room())
-    os << "repose.time_limit " << c.time_limit << " s leaves the rest-by-profile check no room (its "
+    next_note(os, 6) << "repose.time_limit " << c.time_limit << " s leaves the rest-by-profile check no room (its "
        << c.rest_profile_window << " s window after repose.min_collapse_time " << c.min_collapse_time
        << " s): a heap whose rattlers keep the kinetic energy above the threshold will fail not_settled; raise "
           "repose.time_limit above "
        << c.profile_check_time() << " s, or set repose.rest_profile_window to 0 to do without the check";
-  if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty())
-    os << (os.tellp() > 0 ? "; " : "") << cut;
+  if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 6) << cut;
   // theta_deg defaults to 0, so a job that forgets it asks for frictionless grains:
   // they spread instead of heaping (a repose column at eta 0.1 was still flowing at
   // its 1.5 s limit), and with no tangential force nothing turns a grain for eta to resist.
   if (c.material.friction_angle == 0.0)
-    os << (os.tellp() > 0 ? "; " : "") << "material.theta_deg is 0 (its default when the job leaves it out): "
+    next_note(os, 6) << "material.theta_deg is 0 (its default when the job leaves it out): "
        << "frictionless grains build no heap, they spread and may still be moving at repose.time_limit "
           "(not_settled)" << (c.material.rolling_eta != 0.0 ? ", and material.eta exerts no moment without friction" : "");
   return os.str();

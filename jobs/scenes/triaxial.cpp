@@ -242,29 +242,20 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
-// The quasi-static check, forecast: at the start of shear the mean stress is p0, so
-// a nominal inertial number above the limit is a warning every such task will carry.
-// Starts the next of advice()'s notes (they are joined with "; "), written at the
-// significant digits it needs.
-std::ostream& next_note(std::ostringstream& os, int precision) {
-  if (os.tellp() > 0) os << "; ";
-  os.precision(precision);
-  return os;
-}
-
 std::string advice(const nlohmann::json& p) {
   const engine::TriaxialConfig c = config_from(p);
   std::ostringstream os;
+  // The quasi-static check, forecast: at the start of shear the mean stress is p0, so
+  // a nominal inertial number above the limit is a warning every such task will carry.
   const double i0 = c.nominal_inertial_number();
   if (i0 > c.quasi_static_inertial)
     next_note(os, 2) << "inertial number " << i0 << " at p0 (strain rate * d_mean * sqrt(rho/p0)) exceeds the quasi-static limit "
        << c.quasi_static_inertial << ": the run will warn not quasi-static";
-  // The highest mean stress of the preparation against the stiffness: below about
-  // 1000 grains press deep into each other under the load alone (a 10 MPa test's dense
-  // preparation at 1 GPa stops on an overlap past the limit whatever the step).
+  // The highest mean stress of the preparation against the stiffness (a 10 MPa test's
+  // dense preparation at 1 GPa stops on an overlap past the limit whatever the step).
   const double p_max = c.confining_pressure * (c.packing == engine::Packing::dense ? c.prep_pressure_factor : 1.0);
-  const double kappa = c.material.kn / (p_max * c.material.d_min);
-  if (kappa < 1000.0)
+  const double kappa = c.stiffness_number(p_max);
+  if (kappa < engine::TriaxialConfig::kLowStiffnessNumber)
     next_note(os, 3) << "kn / (p d_min) is " << kappa << " at "
        << p_max << " Pa, the preparation's highest mean stress"
        << (c.packing == engine::Packing::dense ? " (triaxial.prep_pressure_factor x p0)" : "")
