@@ -23,7 +23,9 @@ bool all_digits(const std::string& s) {
   return true;
 }
 
-// ".task-ID.TAG.result.json" or its ".tmp": TAG, else "".
+// ".task-ID.TAG.result.json" or its ".tmp": TAG, else "". An MPI worker rank's file,
+// ".task-ID.TAG.rankN.result.json", is its farm's: TAG is rank 0's, the runner whose
+// death orphans it.
 std::string result_file_tag(const std::string& name) {
   static const std::string head = ".task-";
   std::string rest;
@@ -32,7 +34,10 @@ std::string result_file_tag(const std::string& name) {
   if (rest.compare(0, head.size(), head) != 0) return "";
   const auto dot = rest.find('.', head.size());
   if (dot == std::string::npos || !all_digits(rest.substr(head.size(), dot - head.size()))) return "";
-  return rest.substr(dot + 1);
+  std::string tag = rest.substr(dot + 1);
+  const auto rank = tag.rfind(".rank");
+  if (rank != std::string::npos && all_digits(tag.substr(rank + 5))) tag.erase(rank);
+  return tag;
 }
 
 // "NAME.HOST-PID.part" written in this host's pid namespace (HOST is

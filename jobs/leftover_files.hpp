@@ -1,6 +1,7 @@
 #pragma once
 // Files a killed runner leaves in a job's output folder: its workers' result files
-// (".task-ID.RUNNER.result.json" and its ".tmp") and the HDF5 parts they were writing
+// (".task-ID.RUNNER.result.json" and its ".tmp"; an MPI farm's worker ranks write
+// ".task-ID.RUNNER.rankN.result.json") and the HDF5 parts they were writing
 // ("NAME.HOST-PID.part"). A runner that dies by SIGKILL cannot remove them, and its
 // tasks run again elsewhere under other names, so nothing else ever would.
 #include <filesystem>

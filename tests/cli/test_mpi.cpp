@@ -1,5 +1,6 @@
 // The MPI task farm under a real mpirun (built and registered only with DEMCAL_MPI=ON).
 #include "dist_util.hpp"
+#include "jobs/runner.hpp"
 
 using namespace demcal::test;
 
@@ -119,9 +120,24 @@ TEST(Mpi, KilledWorkerRankWithoutRecoveryEndsTheJobAndTheNextRunResumes) {
   EXPECT_NE(r.rc, 0) << r.err;
   const auto rows = tasks_of(d.file("demcal.db"), "abort");
   EXPECT_LT(count_status(rows, "done"), 6);
+  // A worker rank's result file of the dead farm (one a rank killed while writing it
+  // would leave, planted so that there surely is one): the next run removes it.
+  std::vector<std::string> tokens;
+  {
+    demcal::db::Store s(d.file("demcal.db"));
+    tokens = s.runner_tokens();
+  }
+  ASSERT_EQ(tokens.size(), 1u);
+  const fs::path out = d.path / "demcal-out" / "abort";
+  ASSERT_TRUE(fs::is_directory(out));
+  const fs::path orphan = out / (".task-99." + demcal::jobs::file_name_safe(tokens[0]) + ".rank1.result.json");
+  write(orphan.string(), "{}");
   const Result resume = run_demcal({"run", "j.json"}, d.path.string());
   EXPECT_EQ(resume.rc, 0) << resume.err;
   EXPECT_EQ(count_status(tasks_of(d.file("demcal.db"), "abort"), "done"), 6);
+  EXPECT_FALSE(fs::exists(orphan)) << resume.err;
+  for (const auto& e : fs::directory_iterator(out))
+    EXPECT_NE(e.path().filename().string().rfind(".task-", 0), 0u) << "left behind: " << e.path();
 }
 
 // A deleted database takes every later result with it: rank 0 must stop handing

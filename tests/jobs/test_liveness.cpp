@@ -84,6 +84,9 @@ TEST(Liveness, TheFilesOfADeadRunnerAreRemovedAndNoOneElses) {
   };
   const auto dead_result = touch(".task-3." + file_name_safe(gone_here) + ".result.json");
   const auto dead_tmp = touch(".task-4." + file_name_safe(gone_here) + ".result.json.tmp");
+  // An MPI farm's worker rank's file: its farm's rank 0 is the runner that is gone.
+  const auto dead_rank = touch(".task-13." + file_name_safe(gone_here) + ".rank2.result.json");
+  const auto live_rank = touch(".task-14." + file_name_safe(here) + ".rank1.result.json");
   const auto dead_part = touch("7-abc.h5." + process_host_tag() + "-999999999.part");
   // Another container with this hostname: its pids are not ours to judge.
   const auto other_namespace = touch("12-mno.h5." + hostname() + "-pidns1-999999999.part");
@@ -93,9 +96,9 @@ TEST(Liveness, TheFilesOfADeadRunnerAreRemovedAndNoOneElses) {
   const auto live_part = touch("9-def.h5." + process_host_tag() + "-" + std::to_string(getpid()) + ".part");
   const auto other_part = touch("10-ghi.h5.node03-999999999.part");
   const auto task_file = touch("11-jkl.h5");
-  EXPECT_EQ(remove_leftovers_of_dead_runners(dir, s, "not-this-one", nullptr), 3);
-  for (const auto& p : {dead_result, dead_tmp, dead_part}) EXPECT_FALSE(std::filesystem::exists(p)) << p;
-  for (const auto& p : {live_result, other_host, unknown, live_part, other_part, other_namespace, task_file})
+  EXPECT_EQ(remove_leftovers_of_dead_runners(dir, s, "not-this-one", nullptr), 4);
+  for (const auto& p : {dead_result, dead_tmp, dead_part, dead_rank}) EXPECT_FALSE(std::filesystem::exists(p)) << p;
+  for (const auto& p : {live_result, other_host, unknown, live_part, other_part, other_namespace, task_file, live_rank})
     EXPECT_TRUE(std::filesystem::exists(p)) << p;
   // Another host's runner silent past the lease: a watch that has just met it still
   // believes it alive (that host's clock may run behind); judged by the stamp, gone.
