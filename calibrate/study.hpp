@@ -94,6 +94,11 @@ TimestepPoint timestep_point(bool friction, double factor, const std::vector<Res
 // the charts' failure region and the CSV's failure column.
 constexpr double kTimestepExplode = 100.0;
 bool timestep_failed(const TimestepPoint& p, double tolerance);
+// How a point reads in the printed table and the CSV's status column, alike:
+// "unstable" (a replica stopped on an instability), "failed" (finished, with a drift
+// in the failure region), "ran*" (past its law's critical step with no instability
+// showing within the run: no stable step) or "ok".
+std::string timestep_status(const TimestepPoint& p, const TimestepStudy& s);
 
 struct GrazingStudy {
   struct Row {

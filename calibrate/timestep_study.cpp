@@ -106,7 +106,7 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
       // A failed point has no drift, error or cost to give: nan, not a 0 that reads as exact.
       const auto v = [&](double x) { return p.ok ? fmt(x, 6) : std::string("nan"); };
       c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << v(p.dt) << ","
-        << (p.ok ? "ok" : "unstable") << "," << (timestep_failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
+        << timestep_status(p, s) << "," << (timestep_failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
         << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
         << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
     }
@@ -203,6 +203,13 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
 bool timestep_failed(const TimestepPoint& p, double tol) {
   if (!p.ok) return true;
   return p.friction ? p.drift > kTimestepExplode * tol : std::abs(p.drift) > kTimestepExplode * tol;
+}
+
+std::string timestep_status(const TimestepPoint& p, const TimestepStudy& s) {
+  if (!p.ok) return "unstable";
+  if (timestep_failed(p, s.tolerance)) return "failed";
+  const double critical = p.friction ? s.critical_factor_full : s.critical_factor_frictionless;
+  return critical > 0.0 && p.dt_factor > critical * (1.0 + 1e-9) ? "ran*" : "ok";
 }
 
 // One factor of one series over its replicas: failed if any replica failed; else the

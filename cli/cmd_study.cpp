@@ -173,15 +173,12 @@ int study(const StudyArgs& a) {
     char line[240];
     // A run past its law's critical step that did not blow up within the run is no
     // stable step: friction's dissipation can hide the growth for a while.
-    const double critical = p.friction ? s.critical_factor_full : s.critical_factor_frictionless;
-    const bool past = critical > 0.0 && p.dt_factor > critical * (1.0 + 1e-9);
-    const bool blew = p.ok && calibrate::timestep_failed(p, s.tolerance);
-    past_shown = past_shown || (p.ok && past && !blew);
-    failed_shown = failed_shown || blew;
+    const std::string status = calibrate::timestep_status(p, s);
+    past_shown = past_shown || status == "ran*";
+    failed_shown = failed_shown || status == "failed";
     if (p.ok)
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19.3e  %10.2e +- %8.2e  %12.3e  %s\n",
-                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor,
-                    blew ? "failed" : past ? "ran*" : "ok", p.drift,
+                    p.friction ? "friction+rolling" : "frictionless", p.dt_factor, status.c_str(), p.drift,
                     p.drift_mean, p.drift_sd, p.cost, p.pareto ? "*" : "");
     else  // an unstable run has no drift or cost to show
       std::snprintf(line, sizeof line, "%-16s %9.3g  %-8s  %19s  %22s  %12s\n", p.friction ? "friction+rolling" : "frictionless",
@@ -199,6 +196,12 @@ int study(const StudyArgs& a) {
               << "), and no instability showed within the run: not a stable step\n";
   std::cout << s.recommendation << "\n";
   for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+  // No factor passed: the study found no step to recommend, which a script must see.
+  if (s.recommended_factor <= 0.0) {
+    std::cerr << "demcal: study timestep: no dt_factor passed at tolerance " << s.tolerance
+              << " (the table and charts above show where each failed)\n";
+    return kRuntime;
+  }
   return kOk;
 }
 

@@ -145,7 +145,9 @@ void check_timestep(double dt, const StabilityLimits& limits) {
     throw TimestepError(g.mode, dt, g.dt_critical,
                         "time step " + fmt(dt) + " s exceeds the critical step of the " + g.mode + " mode (" +
                             g.contact + "): " + fmt(g.dt_critical) + " s = " +
-                            fmt(g.dt_critical / limits.base_step) + " * sqrt(m_min/Kn)");
+                            fmt(g.dt_critical / limits.base_step) + " * sqrt(m_min/Kn); a dt_factor of at most " +
+                            fmt(g.dt_critical / limits.base_step) +
+                            ", and well below it (a grain with several contacts has a lower limit)");
   }
 }
 

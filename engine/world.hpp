@@ -237,6 +237,9 @@ void World::for_each_contact(F&& f) const {
     const Wall& wall = walls_[w];
     if (!wall.active) continue;
     for (int i = 0; i < n; ++i) {
+      // Walls exert nothing on fixed grains (update_wall_candidates): a floor grain
+      // beyond a wall's plane is no contact, whatever its overlap with the plane.
+      if (p_.fixed[i]) continue;
       const double h = wall.distance(p_.x[i]);
       const double delta = p_.r[i] - h;
       if (delta <= 0.0) continue;

@@ -1,6 +1,7 @@
 #include "repose.hpp"
 
 #include "../enum_names.hpp"
+#include "../format.hpp"
 #include "../errors.hpp"
 #include "../measure.hpp"
 #include "../packing.hpp"
@@ -159,6 +160,12 @@ FloorGrid floor_grid(const ReposeConfig& c) {
   return f;
 }
 }  // namespace
+
+double ReposeConfig::weight_overlap() const {
+  const double d = material.grading().mean();
+  const double force = target_solid_fraction * material.density * gravity * column_height * d * d;
+  return force / (material.kn * stiffness_scale) / (0.5 * material.d_min);
+}
 
 ReposeConfig::GrainEstimate ReposeConfig::grain_estimate() const {
   const double depth = slab_depth_diameters * material.grading().mean();
@@ -502,9 +509,10 @@ struct ReposeRun {
     std::size_t fast = 0;
     for (std::size_t i = 0; i < pp.size(); ++i)
       if (pp.v[i].squaredNorm() > pp.v[fast].squaredNorm()) fast = i;
-    os << "column preparation (" << name << ") not at rest after " << t << " s: kinetic energy per grain " << ke
-       << " J, threshold " << cfg.settle_ke_ratio * ke_unit << " J; fastest grain at (" << pp.x[fast].transpose()
-       << ") m moves at " << pp.v[fast].norm() << " m/s";
+    os << "column preparation (" << name << ") not at rest after " << t << " s (repose.settle_time_limit "
+       << cfg.settle_time_limit << " s): kinetic energy per grain " << ke << " J, threshold "
+       << cfg.settle_ke_ratio * ke_unit << " J; fastest grain at (" << pp.x[fast].transpose() << ") m moves at "
+       << pp.v[fast].norm() << " m/s; a longer repose.settle_time_limit gives the column more time";
     return os.str();
   }
 };
@@ -846,6 +854,13 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     res.outcome.status = SceneStatus::unstable;
     res.outcome.failed_stage = run.stage;
     res.outcome.message = e.what();
+    // What the engine's message cannot know: a scaled-down stiffness lets the column's
+    // own weight press grains deep into each other whatever the step.
+    if (e.quantity() == "overlap" && cfg.weight_overlap() > ReposeConfig::kWeightOverlapNote)
+      res.outcome.message += "; at repose.stiffness_scale " + fmt(cfg.stiffness_scale) +
+                             " the column's weight alone presses a grain at its foot " + fmt(cfg.weight_overlap(), 2) +
+                             " of the smallest radius into its neighbours, and the collapse's impacts add to it: a "
+                             "larger repose.stiffness_scale";
   } catch (const std::runtime_error& e) {
     res.outcome.status = SceneStatus::not_settled;
     res.outcome.failed_stage = run.stage;

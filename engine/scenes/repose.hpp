@@ -137,6 +137,14 @@ struct ReposeConfig {
   // The time the rest-by-profile check needs (its window after min_collapse_time),
   // and whether time_limit leaves it none (the check is on but can never run).
   double profile_check_time() const { return min_collapse_time + rest_profile_window; }
+  // The overlap, as a fraction of the smallest radius, that the column's own weight
+  // presses into a grain at its foot at the scaled stiffness (the column's pressure
+  // rho g H at solid fraction target_solid_fraction, carried by one contact a mean
+  // grain's cross-section): how far stiffness_scale can go. The collapse's impacts add
+  // to it (1e-6 on the seed's material, the quick column: 0.035 here, and an overlap
+  // of 0.27 of the radius in the collapse).
+  double weight_overlap() const;
+  static constexpr double kWeightOverlapNote = 0.02;  // validate notes above this
   bool profile_check_has_no_room() const { return rest_profile_window > 0.0 && time_limit < profile_check_time(); }
 };
 

@@ -437,7 +437,13 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
   // No "; " inside: a task's warnings are joined with it.
   const std::string advice =
       " (shear further: triaxial.axial_strain, or move the window: triaxial.cv_from, triaxial.cv_to)";
-  if (e1.size() >= 3) {
+  // A window where the volume jumps (the dilatancy angle near its +-90 deg bounds) or
+  // the stress ratio swings by tens of degrees is no slow approach to a critical state
+  // that more strain would reach: a collapse, a gas, a sample too small for the rate.
+  const std::string swing_advice =
+      " (phi_mob and the volume swing rather than drift: the shear is too fast or the sample too small for a "
+      "steady state, so a lower triaxial.strain_rate or more triaxial.particles, not more strain)";
+  if (e1.size() >= static_cast<std::size_t>(TriaxialResult::kMinWindowRows)) {
     const double r = linear_trend(e1, ev).slope;  // compression positive: dilation r < 0
     res.cv_dilatancy_deg = sine_to_deg(dilatancy_sine(r, 1.0));
     const Trend drift = linear_trend(e1, phi);
@@ -452,9 +458,20 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
     if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
       why.push_back(std::string("phi_mob ") + (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) + " deg across the window");
+    const bool swings = std::abs(res.cv_dilatancy_deg) >= 45.0 || std::abs(res.cv_drift_deg) >= 10.0;
     if (!why.empty())
       res.outcome.warnings.push_back("not at critical state over " + window + ": " + why.front() +
-                                     (why.size() > 1 ? " and " + why.back() : std::string()) + advice);
+                                     (why.size() > 1 ? " and " + why.back() : std::string()) +
+                                     (swings ? swing_advice : advice));
+  } else {
+    res.phi_cv_se_deg = NAN;
+    res.outcome.warnings.push_back(
+        "the critical-state window (" + window + ") holds " + std::to_string(e1.size()) + " series row" +
+        (e1.size() == 1 ? "" : "s") + ", fewer than " + std::to_string(TriaxialResult::kMinWindowRows) +
+        ": too few to judge whether the sample is at critical state there or to give phi_cv a standard error "
+        "(phi_cv_se_deg not measured; sample the series more finely: triaxial.sample_strain or "
+        "triaxial.sample_steps, or widen the window: triaxial.cv_from, triaxial.cv_to)");
+    return;
   }
   if (res.cv_effective_samples < 4.0)
     res.outcome.warnings.push_back("the critical-state window (" + window + ") holds about " +
@@ -756,10 +773,17 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.phi_peak_smoothed_deg = sine_to_deg(peak_of_running_mean(sines, TriaxialResult::kPeakSmoothingRows));
   res.phi_peak_interior_deg = sine_to_deg(best_in);
   judge_peak(cfg, res);
+  if (sines.size() < static_cast<std::size_t>(TriaxialResult::kPeakSmoothingRows))
+    res.outcome.warnings.push_back(
+        "the shear's series holds " + std::to_string(sines.size()) + " rows, too few to locate the peak: phi_peak " +
+        fmt(res.phi_peak_deg) + " deg is the largest of them (at eps1 " + fmt(res.eps1_at_peak, 3) +
+        ") and phi_peak_smoothed_deg is not measured (sample the series more finely: triaxial.sample_strain or "
+        "triaxial.sample_steps)");
   res.cv_samples = static_cast<int>(cv.size());
   if (cv.empty()) {
     res.outcome.warnings.push_back("critical-state window holds no sample: phi_cv not measured");
     res.phi_cv_deg = NAN;
+    res.phi_cv_se_deg = NAN;
     res.phi_cv_interior_deg = NAN;
     return;
   }
@@ -885,6 +909,13 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
                                    " deg), within two standard errors of zero: the sample is too small or sheared too "
                                    "fast to measure a critical state this weak (more triaxial.particles, a lower "
                                    "strain_rate)");
+  if (res.cv_coordination < TriaxialResult::kSparseCoordination)
+    res.outcome.warnings.push_back("the contact network was sparse over the critical-state window: mean coordination "
+                                   "number " + fmt(res.cv_coordination, 3) + ", below " +
+                                   fmt(TriaxialResult::kSparseCoordination) +
+                                   " (most grains touched no other), so the walls' stress measures a collisional flow "
+                                   "more than a critical state (a lower triaxial.strain_rate or "
+                                   "triaxial.scaled_density, more triaxial.particles)");
   if (res.cv_rows_in_extension > 0)
     res.outcome.warnings.push_back("sigma1 fell below sigma3 on " + window_rows(res.cv_rows_in_extension) +
                                    " (extension, where the test compresses): the sample is too small or sheared too "
@@ -917,7 +948,34 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
     s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "
          "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
          "confining_kpa, or raise material.kn";
+  // In shear the walls drive the grains: far past the quasi-static limit they ram
+  // them into each other faster than the contacts push back (5 /s on 400 grains:
+  // an overlap of 0.29 of a radius after 26,000 steps, the shear being 10 steps).
+  const double inertial = cfg.nominal_inertial_number();
+  if (rig.stage == "shear" && inertial > 10.0 * cfg.quasi_static_inertial)
+    s += "; the shear at triaxial.strain_rate " + fmt(cfg.strain_rate) + " /s has an inertial number of " +
+         fmt(inertial, 3) + " at p0, " + fmt(inertial / cfg.quasi_static_inertial, 3) +
+         " x the quasi-static limit: the walls ram the grains into each other, so a lower triaxial.strain_rate";
   return s;
+}
+
+// What a preparation stage that ran out of budget cannot know: at a step close to an
+// isolated pair's critical step, a grain with several contacts is past its own limit
+// in the rotational modes and the packing jitters without settling or blowing up.
+// Measured (400 grains, dense, theta 30, eta 0.1): at 0.55 and 0.62 of the pair's
+// critical step the stabilise stage kept an unbalanced-force ratio of 0.02-0.05 for
+// 400,000 steps, with the preparation's damping at 0.3 or 0.6; at 0.41 (the default
+// dt_factor 0.3) it settles in a few thousand.
+std::string not_converged_context(const TriaxialConfig& cfg, const TriaxialResult& res, const std::string& message) {
+  if (!(res.dt_critical > 0.0) || res.dt / res.dt_critical <= TriaxialConfig::kJitterStepFraction) {
+    if (message.find("prep_step_budget") != std::string::npos) return "";  // the stage's own advice
+    return "; a larger triaxial.prep_step_budget (" + std::to_string(cfg.prep_step_budget) +
+           " steps) gives the stage more time";
+  }
+  return "; the time step is " + fmt(res.dt / res.dt_critical, 2) + " of an isolated pair's critical step "
+         "(triaxial.dt_factor " + fmt(cfg.dt_factor) + "): a grain with several contacts has a lower limit, and a "
+         "packing stepped this close to it jitters without settling whatever the budget or damping; a smaller "
+         "triaxial.dt_factor (the default " + fmt(TriaxialConfig{}.dt_factor) + ")";
 }
 
 }  // namespace
@@ -964,7 +1022,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   } catch (const StageFailed& e) {
     res.outcome.status = SceneStatus::not_converged;
     res.outcome.failed_stage = rig.stage;
-    res.outcome.message = e.what();
+    res.outcome.message = e.what() + not_converged_context(cfg, res, e.what());
     finish();
     return res;
   }

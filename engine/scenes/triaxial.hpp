@@ -89,6 +89,9 @@ struct TriaxialConfig {
   // Numerics
   double dt = 0.0;          // [s]; 0: dt_factor * sqrt(m_min / Kn), m_min after density scaling
   double dt_factor = 0.3;
+  // Above this fraction of an isolated pair's critical step a dense packing may
+  // jitter without settling (not_converged_context in triaxial.cpp, measured there).
+  static constexpr double kJitterStepFraction = 0.5;
   // Step of the dense preparation's frictionless stages (compression, unloading) as a
   // multiple of dt. 0: the ratio of the frictionless law's critical step to that of
   // the material's full law (tangential and rolling springs, the stiff modes the
@@ -175,6 +178,13 @@ struct TriaxialResult {
   // counts the rows' correlation (integrated autocorrelation time): the noise of this
   // run only, not the scatter between packings (replicas measure that).
   double phi_cv_deg = 0, phi_cv_se_deg = 0;
+  // Fewer rows than this in the window (a coarse series, a short shear) judge nothing:
+  // one row has a standard error of 0 and no trend, two a trend of their own noise.
+  // phi_cv_se_deg is then NaN and the run says why.
+  static constexpr int kMinWindowRows = 3;
+  // A contact network this sparse over the window (whole-box mean coordination
+  // number; a solid at critical state keeps 2 and more) is a collisional flow: warned.
+  static constexpr double kSparseCoordination = 1.0;
   // NaN when not measured (an empty window; fewer than 3 rows for the fits): a 0
   // would read as a perfect critical state.
   double cv_effective_samples = NAN;  // window rows / (2 tau)

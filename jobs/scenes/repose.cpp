@@ -201,6 +201,18 @@ std::string advice(const nlohmann::json& p) {
           "repose.time_limit above "
        << c.profile_check_time() << " s, or set repose.rest_profile_window to 0 to do without the check";
   if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 6) << cut;
+  if (c.weight_overlap() > engine::ReposeConfig::kWeightOverlapNote)
+    next_note(os, 3) << "at repose.stiffness_scale " << c.stiffness_scale << " the column's weight alone presses a grain at "
+       << "its foot about " << c.weight_overlap() << " of the smallest radius into its neighbours, and the collapse's "
+          "impacts add to it: the run may stop on an overlap past the limit; a larger "
+          "repose.stiffness_scale";
+  // Near the limit the collapse's energy guard may stop the run (an isolated pair's
+  // critical step; a grain with several contacts has a lower one).
+  const engine::StepForecast f = c.step_forecast();
+  if (!f.exceeds() && f.dt > 0.8 * f.dt_critical)
+    next_note(os, 3) << "dt is " << f.dt / f.dt_critical << " of the critical step of an isolated pair (" << f.mode
+       << "): a grain with several contacts has a lower limit, and the collapse may gain energy and stop on the "
+          "energy guard (repose.dt_factor; the default " << engine::ReposeConfig{}.dt_factor << ")";
   // theta_deg defaults to 0, so a job that forgets it asks for frictionless grains:
   // they spread instead of heaping (a repose column at eta 0.1 was still flowing at
   // its 1.5 s limit), and with no tangential force nothing turns a grain for eta to resist.

@@ -265,12 +265,14 @@ std::string advice(const nlohmann::json& p) {
   // The critical step is an isolated pair's; a packed grain's several contacts lower
   // the limit, and the dense preparation's frictionless stages step at the same
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
-  // 0.83 did not settle.
+  // 0.83 did not settle, and 400 grains at 0.55 and 0.62 jittered without settling.
   const engine::StepForecast f = c.step_forecast();
-  if (!f.exceeds() && f.dt > 0.8 * f.dt_critical)
+  if (!f.exceeds() && f.dt > engine::TriaxialConfig::kJitterStepFraction * f.dt_critical)
     next_note(os, 3) << "dt is " << f.dt / f.dt_critical
        << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
-          "that limit, and above about 0.8 of it the preparation may blow up or not settle (triaxial.dt_factor)";
+          "that limit, and above about " << engine::TriaxialConfig::kJitterStepFraction
+       << " of it the preparation may not settle, or blow up (triaxial.dt_factor; the default "
+       << engine::TriaxialConfig{}.dt_factor << ")";
   // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
   // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
   // valid setting takes about 5,000.
@@ -279,7 +281,7 @@ std::string advice(const nlohmann::json& p) {
     next_note(os, 3) << "the shear is only " << shear_steps
        << " steps (triaxial.strain_rate " << c.strain_rate << " /s at a step of " << f.dt
        << " s): the lateral walls' servo cannot follow so fast a shear, and the run will likely end invalid; a "
-          "lower strain_rate";
+          "lower triaxial.strain_rate";
   // Random insertion leaves the box at solid fraction initial_solid_fraction (0.3);
   // packed it is about twice that, about 21% of strain on each axis, which the walls
   // close at prep_strain_rate at most. A budget shorter than that stops the first
@@ -309,11 +311,36 @@ std::string advice(const nlohmann::json& p) {
        << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
        << " kg/m^3); triaxial.density_scale scales material.density instead";
   if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 3) << cut;
+  // Loose enough, a stage "reaches equilibrium" at once: 0.99 both stopped the dense
+  // compression after 2,000 steps at box porosity 0.494, and the sample went on as dense.
+  const engine::TriaxialConfig d;
+  if (c.ufr_tolerance > 10.0 * d.ufr_tolerance || c.stress_tolerance > 10.0 * d.stress_tolerance)
+    next_note(os, 3) << "triaxial.ufr_tolerance " << c.ufr_tolerance << " and stress_tolerance " << c.stress_tolerance
+       << " let a preparation stage end with the forces that far out of balance and the walls' stress that far from "
+          "its target: the sample is not the packing asked for (the defaults: "
+       << d.ufr_tolerance << " and " << d.stress_tolerance << ")";
   // Rows every sample_steps steps replace rows every sample_strain of strain: tasks
   // that differ only in sample_strain then store the same series under different keys.
   if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)
     next_note(os, 6) << "triaxial.sample_strain (" << c.sample_strain << ") is not used: a row is taken every "
        << "triaxial.sample_steps (" << c.sample_steps << ") steps of shear instead";
+  // A series too coarse for what the run judges from it: the peak needs a few rows
+  // (its running mean takes 5), the critical-state window at least 3 (one row has a
+  // standard error of 0 and no trend). The run warns too; this says so before it.
+  const double row_strain =
+      c.sample_steps > 0 && f.dt > 0.0 ? static_cast<double>(c.sample_steps) * c.strain_rate * f.dt : c.sample_strain;
+  if (row_strain > 0.0) {
+    const double window_rows = (c.cv_to - c.cv_from) / row_strain;
+    const double shear_rows = c.axial_strain / row_strain;
+    if (window_rows < engine::TriaxialResult::kMinWindowRows || shear_rows < engine::TriaxialResult::kPeakSmoothingRows)
+      next_note(os, 3) << "the series takes a row every " << row_strain << " of strain"
+         << (c.sample_steps > 0 ? " (triaxial.sample_steps)" : " (triaxial.sample_strain)") << ", and the shear ("
+         << c.axial_strain << ") spans " << shear_rows << " of those, the critical-state window (eps1 " << c.cv_from
+         << "-" << c.cv_to << ") " << window_rows << ": fewer than " << engine::TriaxialResult::kPeakSmoothingRows
+         << " rows over the shear or " << engine::TriaxialResult::kMinWindowRows
+         << " in the window cannot locate the peak or judge the window (the run will warn, and phi_cv_se_deg will "
+            "not be measured); sample more finely";
+  }
   return os.str();
 }
 

@@ -84,6 +84,9 @@ TEST(CliStudy, TimestepRecommendationFollowsItsRule) {
     for (std::string cell; f.size() < 6 && std::getline(ls, cell, ',');) f.push_back(cell);
     ASSERT_EQ(f.size(), 6u) << line;
     const double factor = std::stod(f[1]), drift = std::stod(f[5]);
+    // The status column reads as the printed table does: a failure is never "ok".
+    EXPECT_EQ(f[4] == "1", f[3] == "failed" || f[3] == "unstable") << line;
+    EXPECT_NE(r.out.find(f[3]), std::string::npos) << line;
     if (f[0] == "frictionless") frictionless_pass[factor] = f[3] == "ok" && std::abs(drift) <= tol;
     else friction_pass[factor] = f[3] == "ok" && drift <= tol;
   }
@@ -115,6 +118,13 @@ TEST(CliStudy, TimestepRecommendationFollowsItsRule) {
   ASSERT_NE(rec, std::string::npos) << loose.out;
   EXPECT_LE(std::stod(loose.out.substr(rec + 22)), critical_full) << loose.out;
   EXPECT_NE(loose.out.find("but it lies past the critical step of the full law"), std::string::npos) << loose.out;
+
+  // A tolerance no factor meets: said, and the exit code tells a script.
+  const Result none = run_demcal({"study", "timestep", "--quick", "--db", "s.db", "--out", "c", "--tolerance", "1e-12"},
+                                 d.path.string());
+  EXPECT_EQ(none.rc, 1) << none.err << none.out;
+  EXPECT_NE(none.out.find("no dt_factor passed"), std::string::npos) << none.out;
+  EXPECT_NE(none.err.find("no dt_factor passed at tolerance 1e-12"), std::string::npos) << none.err;
 }
 
 TEST(CliStudy, GrazingQuickChartsTheEnergyRatio) {

@@ -629,12 +629,27 @@ TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
   EXPECT_EQ(w.find("; "), std::string::npos) << "a task's warnings are joined with '; ': " << w;
   // Few independent samples.
   EXPECT_TRUE(has(judge(0.0, 0.0, 0.5, 3.0), "independent samples"));
-  // Fewer than 3 rows: nothing fitted, and the metrics say so (NaN, not a perfect 0).
+  // Fewer than 3 rows: nothing fitted, and the metrics say so (NaN, not a perfect 0),
+  // the standard error too (one row's is 0), with one warning that says why.
   TriaxialResult two;
   two.cv_effective_samples = 2.0;
+  two.phi_cv_se_deg = 0.0;
   judge_critical_state(cfg, {0.2, 0.3}, {0.0, 0.0}, {28.0, 28.0}, two);
   EXPECT_TRUE(std::isnan(two.cv_dilatancy_deg));
   EXPECT_TRUE(std::isnan(two.cv_drift_deg));
+  EXPECT_TRUE(std::isnan(two.phi_cv_se_deg));
+  ASSERT_EQ(two.outcome.warnings.size(), 1u);
+  EXPECT_NE(two.outcome.warnings.front().find("holds 2 series rows, fewer than 3"), std::string::npos)
+      << two.outcome.warnings.front();
+  EXPECT_NE(two.outcome.warnings.front().find("triaxial.sample_strain"), std::string::npos);
+  // A window where the volume jumps or the stress ratio swings by tens of degrees is no
+  // slow approach that more strain would finish: the advice says so instead.
+  for (const TriaxialResult& r : {collapsing, judge(0.0, 30.0, 0.2, 20.0)}) {
+    ASSERT_EQ(r.outcome.warnings.size(), 1u);
+    EXPECT_NE(r.outcome.warnings.front().find("not more strain"), std::string::npos) << r.outcome.warnings.front();
+    EXPECT_EQ(r.outcome.warnings.front().find("shear further"), std::string::npos) << r.outcome.warnings.front();
+  }
+  EXPECT_TRUE(has(dilating, "shear further"));
 }
 
 // The figures of a run that met it (500 grains, dt factor 0.15, seed 3: the axial
@@ -705,6 +720,43 @@ TEST(TriaxialScene, ExhaustedStepBudgetFailsTheStageWithoutMetrics) {
     EXPECT_EQ(kv.first.find("phi"), std::string::npos) << "failed run reports " << kv.first;
     EXPECT_EQ(kv.first.find("porosity"), std::string::npos) << "failed run reports " << kv.first;
   }
+}
+
+// A stage out of budget says what would help: more steps, or, at a step close to the
+// critical one (where a packing jitters without settling), a smaller dt_factor.
+TEST(TriaxialScene, AnExhaustedStageSaysWhatWouldHelp) {
+  TriaxialConfig c = small(Packing::dense);
+  c.particles = 200;
+  c.prep_step_budget = 3000;
+  const TriaxialResult plain = run_triaxial(c);
+  ASSERT_EQ(plain.outcome.status, SceneStatus::not_converged);
+  EXPECT_NE(plain.outcome.message.find("a larger triaxial.prep_step_budget (3000 steps)"), std::string::npos)
+      << plain.outcome.message;
+  c.dt_factor = 0.45;  // 0.62 of the pair's critical step
+  const TriaxialResult close = run_triaxial(c);
+  ASSERT_EQ(close.outcome.status, SceneStatus::not_converged);
+  EXPECT_NE(close.outcome.message.find("of an isolated pair's critical step (triaxial.dt_factor 0.45)"),
+            std::string::npos)
+      << close.outcome.message;
+  EXPECT_NE(close.outcome.message.find("a smaller triaxial.dt_factor"), std::string::npos) << close.outcome.message;
+}
+
+// A series too coarse for what is judged from it: the peak is the largest of a few
+// rows and the window's one row has no standard error; both said, neither stored as
+// measured.
+TEST(TriaxialScene, ASeriesTooCoarseToJudgeSaysSo) {
+  TriaxialConfig c = short_loose(0.004, 0.001);
+  c.sample_steps = 1000000000;  // one row at the start, one at the end
+  const TriaxialResult r = run_triaxial(c);
+  ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
+  EXPECT_EQ(r.series.rows.size(), 2u);
+  EXPECT_TRUE(std::isnan(r.phi_cv_se_deg));
+  EXPECT_TRUE(std::isnan(r.phi_peak_smoothed_deg));
+  EXPECT_NE(r.outcome.message.find("the shear's series holds 2 rows, too few to locate the peak"), std::string::npos)
+      << r.outcome.message;
+  EXPECT_NE(r.outcome.message.find("holds 1 series row, fewer than 3"), std::string::npos) << r.outcome.message;
+  for (const auto& kv : r.metrics())
+    if (kv.first == "phi_cv_se_deg") EXPECT_TRUE(std::isnan(kv.second));
 }
 
 TEST(TriaxialScene, TooLargeATimeStepIsRefused) {

@@ -198,6 +198,30 @@ TEST(Measurements, UnbalancedForceRatioIgnoresLocalDamping) {
     }
 }
 
+TEST(Measurements, AFixedGrainBeyondAWallIsNoContact) {
+  // Walls exert nothing on fixed grains (a rough floor's grains beyond a gate's plane):
+  // the measurements must not count what the forces do not exert. A fixed grain three
+  // radii behind a wall's plane and a free grain pressed into it.
+  const double r = 0.5e-3;
+  Particles p;
+  p.add(Vec3(0.0, 0.0, -3.0 * r), r, kDensity, /*is_fixed=*/true);
+  p.add(Vec3(0.01, 0.0, 0.999 * r), r, kDensity);
+  Wall floor;
+  floor.name = "floor";
+  World w(std::move(p), {floor}, open_domain(), law(3e7, 2.7e7, 30.0, 1.0, 0.1), options(safe_dt()));
+  w.refresh();
+  int contacts = 0;
+  w.for_each_contact([&](const ContactView& c) {
+    ++contacts;
+    EXPECT_EQ(c.i, 1) << "the fixed grain is in no contact";
+  });
+  EXPECT_EQ(contacts, 1);
+  EXPECT_EQ(w.walls()[0].contacts, 1);
+  // The free grain's overlap, 0.001 r (4e-6 J), is the only elastic energy: the fixed
+  // grain's 4 r with the plane would read 0.5 kn (2 mm)^2 = 60 J.
+  EXPECT_NEAR(energies(w).normal, 0.5 * 3e7 * std::pow(1e-3 * r, 2), 1e-9);
+}
+
 TEST(Conservation, ContactAcrossThePeriodicSeamActsAsInTheMiddle) {
   // The same oblique, sliding, rolling pair twice: straddling the periodic seam in x,
   // and unwrapped in the middle of the box. The seam must change nothing: the same

@@ -772,6 +772,39 @@ TEST(TriaxialReposeScenes, ASampleStrainThatSampleStepsOverridesIsNotedUnused) {
   EXPECT_EQ(notes_of(j).find("sample_strain"), std::string::npos) << notes_of(j);
 }
 
+// A series too coarse to locate the peak or judge the critical-state window, a step
+// close enough to the critical one for a packing to jitter without settling, and
+// tolerances that end a stage at once: noted before the run, which would warn or
+// fail on them.
+TEST(TriaxialReposeScenes, ACoarseSeriesAndAStepNearTheLimitAreNoted) {
+  json j = triaxial_base();
+  EXPECT_EQ(notes_of(j).find("the series takes a row"), std::string::npos) << notes_of(j);
+  EXPECT_EQ(notes_of(j).find("of the critical step"), std::string::npos) << notes_of(j);
+  j["triaxial"]["sample_strain"] = j["triaxial"].value("axial_strain", 0.30) / 2;
+  EXPECT_NE(notes_of(j).find("cannot locate the peak or judge the window"), std::string::npos) << notes_of(j);
+  j["triaxial"].erase("sample_strain");
+  j["triaxial"]["dt_factor"] = 0.45;
+  EXPECT_NE(notes_of(j).find("of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("above about 0.5 of it the preparation may not settle"), std::string::npos) << notes_of(j);
+  // Equilibrium tolerances loose enough that a stage ends at once.
+  j["triaxial"].erase("dt_factor");
+  j["triaxial"]["ufr_tolerance"] = 0.5;
+  EXPECT_NE(notes_of(j).find("the sample is not the packing asked for"), std::string::npos) << notes_of(j);
+}
+
+// A repose column whose own weight presses deep overlaps at a scaled-down stiffness,
+// and a step at the limit: noted.
+TEST(TriaxialReposeScenes, AReposeStiffnessScaleTooLowAndAStepAtTheLimitAreNoted) {
+  json j = repose_base();
+  EXPECT_EQ(notes_of(j).find("stiffness_scale"), std::string::npos) << notes_of(j);
+  j["repose"]["stiffness_scale"] = 1e-6;
+  EXPECT_NE(notes_of(j).find("the column's weight alone presses a grain at its foot"), std::string::npos)
+      << notes_of(j);
+  j["repose"].erase("stiffness_scale");
+  j["repose"]["dt_factor"] = 0.72;
+  EXPECT_NE(notes_of(j).find("of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
+}
+
 // theta_deg defaults to 0: a repose job that leaves it out asks for frictionless
 // grains, which heap nothing. Noted, and eta's uselessness with it.
 TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
