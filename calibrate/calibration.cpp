@@ -320,11 +320,8 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
   // Results whose phi_cv window was not at critical state enter a critical-state fit as
   // if they were: say how many, per metric, apart from the general note.
   for (const auto& rs : cal.surfaces)
-    if (rs.not_critical > 0)
-      cal.result.warnings.push_back(std::to_string(rs.not_critical) + " of the " + rs.metric + " results used from job " +
-                                    rs.job + " come from a window the run judged not at critical state (still "
-                                    "dilating or phi_mob drifting; " + jobs::query_hint(store.path(), rs.job) +
-                                    " shows which): the surrogate takes them as critical-state values");
+    if (const std::string note = rs.not_critical_note(jobs::query_hint(store.path(), rs.job)); !note.empty())
+      cal.result.warnings.push_back(note);
   // A peak taken from a spike of one or two rows reads degrees above the curve's hump.
   for (const auto& rs : cal.surfaces)
     if (rs.on_spike > 0)
@@ -333,13 +330,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     "(" + jobs::query_hint(store.path(), rs.job) + " shows which): the surrogate takes the spike as "
                                     "peak strength; a target on phi_peak_smoothed_deg fits the peak of the running "
                                     "mean instead");
-  for (const auto& [job, rs] : warned) {
-    const std::string w = cut_at_word(first_warning(rs->first_warning), 240);
-    int used = 0;
-    for (const auto& p : rs->points) used += static_cast<int>(p.values.size());
-    cal.result.warnings.push_back(std::to_string(rs->warned) + " of the " + std::to_string(used) + " results used from job " +
-                                  job + " carry warnings (" + jobs::query_hint(store.path(), job) + "), e.g.: " + w);
-  }
+  for (const auto& [job, rs] : warned) cal.result.warnings.push_back(rs->warned_note(jobs::query_hint(store.path(), job)));
   return cal;
 }
 

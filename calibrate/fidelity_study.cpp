@@ -1,5 +1,6 @@
 // The fidelity studies (triaxial and repose): one knob at a time around a baseline (issue 9).
 #include "metric.hpp"
+#include "db/store.hpp"
 #include "study.hpp"
 #include "study_support.hpp"
 
@@ -491,6 +492,12 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           if (std::isfinite(wall)) failed_wall.push_back(wall);
           continue;
         }
+        ++s.finished;
+        if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
+          ++s.warned;
+          s.not_critical += w.find("not at critical state") != std::string::npos;
+          s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
+        }
         // Marked and listed: one spike can set a setting's mean, spread and verdict
         // (never for repose, whose results hold no peak).
         if (peak_on_a_spike(r.metrics)) {
@@ -543,7 +550,15 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     std::ostringstream rec;
     rec << k.name << ": ";
     const std::string ref_label = ref != k.points.end() ? ref->label : label_of(kd.reference);
-    if (!have_ref) {
+    // The reference alone finished: nothing was measured against it.
+    const bool alone = have_ref && std::none_of(k.points.begin(), k.points.end(), [](const FidelityPoint& p) {
+      return !p.reference && std::isfinite(p.mean[0]);
+    });
+    k.judged = have_ref && !alone;
+    if (alone) {
+      rec << "no recommendation: every setting but the reference " << ref_label
+          << " failed in every replica, so nothing was compared with it (the failed tasks are listed below)";
+    } else if (!have_ref) {
       rec << "no recommendation: the reference " << ref_label << " failed in every replica";
     } else if (!best) {
       rec << "no setting within " << fmt(s.tolerance) << " deg of the reference " << ref_label
@@ -588,6 +603,15 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     any = true;
   }
   s.recommendation = summary.str();
+  if (s.warned > 0) {
+    std::ostringstream w;
+    w << "warnings: " << s.warned << " of the " << s.finished << " finished tasks carry warnings (";
+    if (s.not_critical > 0) w << s.not_critical << " not at critical state, ";
+    if (s.not_quasi_static > 0) w << s.not_quasi_static << " not quasi-static, ";
+    w << "demcal query --db " << store.path() << " shows them all): the errors above compare "
+      << "what those runs gave, and a setting judged against a warned reference inherits its warning";
+    s.warnings_note = w.str();
+  }
 
   // A run of some knobs names its files after them, charts included, so that runs of
   // other knobs into the same folder keep theirs, and a chart never shows another run
@@ -607,6 +631,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     WholeTextFile r(rec);
     for (const auto& k : s.knobs) r << k.recommendation << "\n";
     r << s.recommendation << "\n";
+    if (!s.warnings_note.empty()) r << s.warnings_note << "\n";
     if (!s.failures.empty()) {
       r << "failed tasks:\n";
       for (const auto& f : s.failures) r << "  " << f << "\n";
@@ -619,6 +644,10 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   }
   s.files.push_back(rec.string());
   return s;
+}
+
+bool FidelityStudy::any_judged() const {
+  return std::any_of(knobs.begin(), knobs.end(), [](const FidelityKnob& k) { return k.judged; });
 }
 
 std::string spike_heading() {

@@ -232,7 +232,8 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
   const std::string title = rs.label + ", job " + rs.job + (r.pins.empty() ? "" : " (" + r.pins + ")") + ": " +
                             std::to_string(rs.with_data()) + " points with data, " + std::to_string(rs.holes()) +
                             " holes" +
-                            (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : "");
+                            (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : "") +
+                            (rs.warned > 0 ? ", " + std::to_string(rs.warned) + " result(s) warned" : "");
   g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
     << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe(metric_spec(rs.metric).unit)) : quoted(r.title))
     << " noenhanced font ',10' offset 0,0.6\n"

@@ -1,4 +1,5 @@
 #include "response_surface.hpp"
+#include "excerpt.hpp"
 
 #include "jobs/job_error.hpp"
 
@@ -56,6 +57,21 @@ Box ResponseSurface::data_box() const {
   const auto t = data_thetas(), e = data_etas();
   if (t.empty() || e.empty()) return Box{};
   return {t.front(), t.back(), e.front(), e.back()};
+}
+
+std::string ResponseSurface::not_critical_note(const std::string& hint) const {
+  if (not_critical == 0) return "";
+  return std::to_string(not_critical) + " of the " + metric + " results used from job " + job +
+         " come from a window the run judged not at critical state (still dilating or phi_mob drifting; " + hint +
+         " shows which): the surrogate takes them as critical-state values";
+}
+
+std::string ResponseSurface::warned_note(const std::string& hint) const {
+  if (warned == 0) return "";
+  int used = 0;
+  for (const auto& p : points) used += p.n();
+  return std::to_string(warned) + " of the " + std::to_string(used) + " results used from job " + job +
+         " carry warnings (" + hint + "), e.g.: " + cut_at_word(calibrate::first_warning(first_warning), 240);
 }
 
 int ResponseSurface::holes() const {

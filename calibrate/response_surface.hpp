@@ -70,6 +70,12 @@ struct ResponseSurface {
   double replica_se() const;
   // Fills mean, sd, se and pooled_sd from the values.
   void summarise();
+  // What the results used stand on, one sentence each (empty when nothing to say), for
+  // a fit's and a map's output alike: how many come from a window the run judged not
+  // at critical state, and how many carry any warning, with the first of them.
+  // `hint` tells where to see which (jobs::query_hint).
+  std::string not_critical_note(const std::string& hint) const;
+  std::string warned_note(const std::string& hint) const;
 };
 
 struct GatherOptions {

@@ -137,6 +137,9 @@ struct FidelityKnob {
   std::vector<std::string> jobs;      // job names (one per knob, or one per setting)
   std::string recommendation;    // the sentence printed
   double recommended = NAN;      // NaN: none within tolerance
+  // Whether anything was compared with the reference (false: it failed, or every other
+  // setting did): a knob not judged has no answer, not even "keep the reference".
+  bool judged = false;
   std::string chart;             // PNG
 };
 
@@ -153,6 +156,13 @@ struct FidelityStudy {
   std::vector<std::string> job_files;   // written into out_dir/jobs, runnable with `demcal run`
   std::vector<std::string> failures;    // "particles=2000 seed 2: ..." every failed task
   std::vector<std::string> spikes;      // "dt=0.15 seed 3: ..." every replica whose peak rests on a spike
+  // Finished tasks whose run warned (of any kind, spikes included), those of them not
+  // at critical state and not quasi-static, and the sentence that says so (empty: none).
+  int warned = 0, not_critical = 0, not_quasi_static = 0, finished = 0;
+  std::string warnings_note;
+  // Whether some knob was judged against its reference (none: the study has no
+  // answer, exit 1; a knob judged with no setting within tolerance keeps its reference).
+  bool any_judged() const;
   std::string baseline;                 // "particles 500, rate 0.0003, ..."
   std::string recommendation;           // summary line
   std::vector<std::string> files;

@@ -225,7 +225,27 @@ Surrogate fit_surrogate(const ResponseSurface& rs) {
       y.push_back(p.mean);
       w.push_back(p.n());
     }
-  return fit_surrogate(th, et, y, w, rs.box());
+  try {
+    return fit_surrogate(th, et, y, w, rs.box());
+  } catch (const std::invalid_argument& e) {
+    // Say why the other grid points have no value: the counts alone hide that most
+    // tasks failed.
+    GridPoint why;
+    int holes = 0;
+    for (const auto& p : rs.points)
+      if (p.hole() && !p.refine) {
+        ++holes;
+        why.failed += p.failed;
+        why.invalid += p.invalid;
+        why.unfinished += p.unfinished;
+        why.missing += p.missing;
+      }
+    if (holes == 0) throw;
+    const std::string tasks = why.without_value();
+    throw std::invalid_argument(std::string(e.what()) + " (" + std::to_string(holes) + " grid point(s) have none: " +
+                                (tasks.empty() ? std::string("no task there") : "their tasks " + tasks) +
+                                "; demcal status shows why tasks failed)");
+  }
 }
 
 }  // namespace demcal::calibrate

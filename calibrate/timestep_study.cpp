@@ -307,8 +307,25 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
       rec << "; the next factor's frictionless runs drifted within the tolerance too, but it lies past the critical "
              "step of the full law, which the engine refuses for a job";
   } else {
-    rec << "no dt_factor passed: every factor drifted by more than " << fmt(s.tolerance)
-        << " per simulated second or went unstable";
+    // Why the smallest factor failed: every factor up to a recommendation must pass.
+    std::string why = "no run finished";
+    for (const auto& p : s.points) {
+      if (p.friction) continue;
+      const auto fr = std::find_if(s.points.begin(), s.points.end(),
+                                   [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
+      if (!p.ok)
+        why = "the frictionless runs went unstable";
+      else if (std::abs(p.drift) > s.tolerance)
+        why = "the frictionless runs drifted by " + fmt(p.drift, 3) + " per simulated second";
+      else if (fr == s.points.end() || !fr->ok)
+        why = "the runs with friction and rolling went unstable";
+      else
+        why = "the runs with friction and rolling gained " + fmt(fr->drift, 3) + " per simulated second";
+      why = "already at the smallest factor, " + fmt(p.dt_factor) + ", " + why;
+      break;
+    }
+    rec << "no dt_factor passed at tolerance " << fmt(s.tolerance) << " per simulated second: " << why
+        << " (a factor is recommended only if it and every smaller one pass)";
   }
   s.recommendation = rec.str();
   write_timestep_charts(s, o.out_dir);

@@ -9,6 +9,7 @@
 #include "calibrate/metric.hpp"
 #include "db/store.hpp"
 #include "jobs/job_error.hpp"
+#include "jobs/query.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -84,6 +85,10 @@ void add_map(CLI::App& app, int& exit_code) {
       if (rs.on_spike > 0)
         std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
                   << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
+      // What the surface stands on, as fit says it.
+      const std::string hint = jobs::query_hint(a->db, job);
+      for (const std::string& note : {rs.not_critical_note(hint), rs.warned_note(hint)})
+        if (!note.empty()) std::cout << "warning: " << note << "\n";
       if (!overlay && other_pins > 0)
         std::cout << "no fit drawn: job " << job << "'s " << other_pins << " fit(s) were made on other --where pins "
                   << "than this map's (" << (pins.empty() ? std::string("none") : pins)

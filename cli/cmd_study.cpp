@@ -90,8 +90,16 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
     std::cout << calibrate::spike_heading() << " (" << s.spikes.size() << "):\n";
     for (const auto& f : s.spikes) std::cout << "  " << f << "\n";
   }
+  if (!s.warnings_note.empty()) std::cout << s.warnings_note << "\n";
   std::cout << s.recommendation << "\n";
   for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+  // No knob could be judged (its reference failed, or every other setting did): the
+  // study has no answer, which a script must see.
+  if (!s.any_judged()) {
+    std::cerr << "demcal: study " << s.name << ": no knob could be judged against its reference (the lines above "
+                 "say why)\n";
+    return kRuntime;
+  }
   return kOk;
 }
 
@@ -187,6 +195,8 @@ int study(const StudyArgs& a) {
   }
   std::cout << "worst: the replica with the largest |drift| (frictionless) or the largest gain (friction+rolling, "
                "which dissipates: only a gain is error)\n";
+  std::cout << "ok: finished, short of the failure region (" << calibrate::kTimestepExplode
+            << " x the tolerance); the recommendation asks for the tolerance itself\n";
   if (failed_shown)
     std::cout << "failed: finished, but its energy drift exceeds " << calibrate::kTimestepExplode
               << " x the tolerance per simulated second (the charts' failure region)\n";

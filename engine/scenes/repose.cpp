@@ -428,8 +428,18 @@ Fill fill_column(const ReposeConfig& cfg, const ReposeSizes& z, const Floor& flo
     if (floor.grains.x[i][0] < z.W) f.grains.add(floor.grains.x[i], floor.grains.r[i], mat.density, true);
   f.n_floor = f.grains.size();
   const bool periodic_y = cfg.side_walls == SideWalls::periodic;
-  insert_random(f.grains, radii, Vec3(0.0, 0.0, f.z0), Vec3(z.W, z.Ly, f.z0 + f.height), mat.density, rng,
-                {false, periodic_y, false});
+  try {
+    insert_random(f.grains, radii, Vec3(0.0, 0.0, f.z0), Vec3(z.W, z.Ly, f.z0 + f.height), mat.density, rng,
+                  {false, periodic_y, false});
+  } catch (const ConfigError& e) {  // the insertion's own words name no key of this scene
+    throw ConfigError("repose.fill_solid_fraction",
+                      std::string(e.what()).substr(e.field().size() + 2) +
+                          " (the column's grains are inserted at random at repose.fill_solid_fraction " +
+                          fmt(cfg.fill_solid_fraction) + " in a slab of repose.depth_diameters " +
+                          fmt(cfg.slab_depth_diameters) + " mean diameters" +
+                          (periodic_y ? std::string() : std::string(" between side walls, which leave less room")) +
+                          "): a lower fill_solid_fraction or a deeper slab");
+  }
   return f;
 }
 

@@ -217,6 +217,25 @@ TEST(CalibrateMap, WritesPngAndSvgWithHoles) {
   EXPECT_THROW(calibrate::draw_map(rs, sur, bad), jobs::JobError);
 }
 
+// Too few points with data for a surface: the refusal says why the others have none.
+TEST(CalibrateMap, TooFewPointsSaysWhyTheOthersHaveNone) {
+  TempDir d;
+  db::Store s(d.file("demcal.db"));
+  store_fake_job(s, "few", {15, 20, 25}, {0.0, 0.1, 0.2}, 1, 0.3, 7,
+                 {{15, 0.0}, {20, 0.0}, {25, 0.0}, {15, 0.1}, {20, 0.1}, {25, 0.1}}, {{15, 0.2}});
+  const auto rs = calibrate::gather(s, "few", "phi_peak");
+  try {
+    calibrate::fit_surrogate(rs);
+    FAIL() << "a surface on 2 points";
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("needs at least 4 points with data, got 2 (7 grid point(s) have none: their tasks 6 failed, "
+                        "1 not finished; demcal status shows why tasks failed)"),
+              std::string::npos)
+        << what;
+  }
+}
+
 // A metric with one value over the whole grid (a setting stored as a metric, a
 // sample size that does not vary): gnuplot refused the empty colour range, and
 // `map` exited 1 with gnuplot's own error about a script already deleted. It draws
@@ -448,6 +467,15 @@ TEST(CalibrateCli, FitSaysWhenItsResultsCarryWarnings) {
             std::string::npos)
       << r.out << r.err;
   EXPECT_EQ((r.out + r.err).find("of the phi_peak results used"), std::string::npos) << r.out << r.err;
+  // A map stands on the same results and says the same, in its output and its title.
+  r = run_demcal({"map", "--metric", "phi_cv", "--out", "cv.svg"}, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("warning: 2 of the phi_cv results used from job grid come from a window the run judged not at "
+                       "critical state"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("warning: 5 of the 72 results used from job grid carry warnings"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("cv.svg")).find("5 result(s) warned"), std::string::npos);
   // One result whose phi_peak rests on a spike, judged from the stored values (a result
   // stored before the scene warned of spikes counts too): the phi_peak surface says so,
   // the phi_cv one does not. One 2 deg above its running mean is no spike.

@@ -202,6 +202,11 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_NE(r.out.find("dt=2 seed 1: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("dt=2 seed 2: "), std::string::npos) << r.out;
   EXPECT_NE(slurp(d.file("f/fidelity-dt_dt.dat")).find("\"2: 2/2 failed\""), std::string::npos);
+  // The quick study's fast shear warns on every task (not quasi-static): counted, with
+  // where to see them, in the output and the recommendation file.
+  EXPECT_NE(r.out.find("warnings: 4 of the 4 finished tasks carry warnings ("), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("4 not quasi-static"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(d.file("f/fidelity-dt_recommendation.txt")).find("warnings: 4 of the 4"), std::string::npos);
   // The script kept beside the chart redraws it from its own folder: names, no paths,
   // no hidden part.
   const std::string gp = slurp(d.file("f/fidelity-dt_dt.gp"));
@@ -224,6 +229,14 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   ASSERT_EQ(again.rc, 0) << again.err;
   EXPECT_NE(again.out.find("6 tasks in s.db (6 reused, 0 run now)"), std::string::npos) << again.out;
   EXPECT_EQ(slurp(d.file("f/fidelity-dt_recommendation.txt")), first);
+  // The failing setting as the reference: no answer, said, and the exit code is 1.
+  const std::vector<std::string> no_answer = {"study", "fidelity", "--quick", "--knobs", "dt", "--replicas", "2",
+                                              "--workers", "1", "--db", "s.db", "--out", "g", "--reference", "dt=2"};
+  const Result none = run_demcal(no_answer, d.path.string());
+  EXPECT_EQ(none.rc, 1) << none.err << none.out;
+  EXPECT_NE(none.out.find("dt: no recommendation: the reference 2 failed in every replica"), std::string::npos)
+      << none.out;
+  EXPECT_NE(none.err.find("no knob could be judged against its reference"), std::string::npos) << none.err;
   // A replica whose peak rests on a spike (its phi_peak 5 deg above the running mean's
   // peak, as a buckling wall chain makes it) is marked, counted and listed: one such
   // replica can set a setting's mean, spread and verdict. The quick study's inertial

@@ -48,6 +48,27 @@ TEST(CollisionScene, BeyondTheCriticalStepIsRefusedUnlessAStudyAsksForIt) {
   const CollisionResult r = run_collision(c);
   EXPECT_GT(r.dt / r.dt_critical, 1.0);
   EXPECT_FALSE(r.outcome.ok() && r.max_relative_error < 1e-2) << "an unstable step went unnoticed";
+  // Whichever way it ended, it says that the step was past the limit and what to change.
+  if (r.outcome.ok())
+    EXPECT_NE(r.outcome.message.find("x the critical step (normal), allowed by collision.allow_unstable_dt"),
+              std::string::npos)
+        << r.outcome.message;
+  else
+    EXPECT_NE(r.outcome.message.find("a smaller collision.dt_factor"), std::string::npos) << r.outcome.message;
+}
+
+// Random insertion cannot reach every solid fraction: the failure names the key.
+TEST(CollisionScene, AGasTooDenseToInsertNamesItsKey) {
+  CollisionConfig c = small();
+  c.particles = 200;
+  c.solid_fraction = 0.4;
+  try {
+    run_collision(c);
+    FAIL() << "200 grains placed at random at solid fraction 0.4";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.field(), "collision.solid_fraction");
+    EXPECT_NE(std::string(e.what()).find("could not place 200 grains"), std::string::npos) << e.what();
+  }
 }
 
 // Below the critical step but far past the accurate one, the integrator gains
