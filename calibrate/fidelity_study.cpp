@@ -410,6 +410,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
   const std::vector<KnobDef> knobs = selected_knobs(d, o);
   FidelityStudy s;
+  std::set<std::int64_t> counted;  // tasks counted in s.finished and s.warned
   s.name = name;
   s.stem = name + (o.smoothed_peak ? "-smoothed-peak" : "");
   s.smoothed_peak = o.smoothed_peak;
@@ -492,11 +493,14 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           if (std::isfinite(wall)) failed_wall.push_back(wall);
           continue;
         }
-        ++s.finished;
-        if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
-          ++s.warned;
-          s.not_critical += w.find("not at critical state") != std::string::npos;
-          s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
+        // The baseline's tasks stand in every knob's table: counted once.
+        if (counted.insert(r.task.id).second) {
+          ++s.finished;
+          if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
+            ++s.warned;
+            s.not_critical += w.find("not at critical state") != std::string::npos;
+            s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
+          }
         }
         // Marked and listed: one spike can set a setting's mean, spread and verdict
         // (never for repose, whose results hold no peak).
@@ -608,7 +612,12 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
     w << "warnings: " << s.warned << " of the " << s.finished << " finished tasks carry warnings (";
     if (s.not_critical > 0) w << s.not_critical << " not at critical state, ";
     if (s.not_quasi_static > 0) w << s.not_quasi_static << " not quasi-static, ";
-    w << "demcal query --db " << store.path() << " shows them all): the errors above compare "
+    std::set<std::string> names;
+    for (const auto& k : s.knobs) names.insert(k.jobs.begin(), k.jobs.end());
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+    w << "demcal query --db " << store.path() << " --job JOB lists them, JOB one of " << list
+      << "): the errors above compare "
       << "what those runs gave, and a setting judged against a warned reference inherits its warning";
     s.warnings_note = w.str();
   }

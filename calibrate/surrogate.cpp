@@ -225,11 +225,12 @@ Surrogate fit_surrogate(const ResponseSurface& rs) {
       y.push_back(p.mean);
       w.push_back(p.n());
     }
+  if (th.size() >= 4) return fit_surrogate(th, et, y, w, rs.box());
   try {
     return fit_surrogate(th, et, y, w, rs.box());
   } catch (const std::invalid_argument& e) {
-    // Say why the other grid points have no value: the counts alone hide that most
-    // tasks failed.
+    // Too few points: say why the other grid points have no value, as the count
+    // alone hides that most tasks failed.
     GridPoint why;
     int holes = 0;
     for (const auto& p : rs.points)
@@ -242,9 +243,10 @@ Surrogate fit_surrogate(const ResponseSurface& rs) {
       }
     if (holes == 0) throw;
     const std::string tasks = why.without_value();
-    throw std::invalid_argument(std::string(e.what()) + " (" + std::to_string(holes) + " grid point(s) have none: " +
+    throw std::invalid_argument(std::string(e.what()) + " (" + std::to_string(holes) + " grid point(s) have no data: " +
                                 (tasks.empty() ? std::string("no task there") : "their tasks " + tasks) +
-                                "; demcal status shows why tasks failed)");
+                                (why.failed > 0 ? std::string("; demcal status shows why tasks failed") : std::string()) +
+                                ")");
   }
 }
 

@@ -103,8 +103,8 @@ void warn_past_critical(CollisionResult& res) {
   res.outcome.warnings.push_back("dt = " + fmt(res.dt / res.dt_critical, 3) + " x the critical step (" +
                                  res.critical_mode + "), allowed by collision.allow_unstable_dt: no instability showed "
                                  "within these " + std::to_string(res.steps_done) + " steps, but this is no stable "
-                                 "step (friction's dissipation or brief contacts can hide the growth; a denser or "
-                                 "longer run would show it)");
+                                 "step (friction's dissipation or brief contacts can hide the growth, which a denser "
+                                 "or longer run would show)");
   res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + res.outcome.warnings.back();
 }
 

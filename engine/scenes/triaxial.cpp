@@ -438,8 +438,10 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
   const std::string advice =
       " (shear further: triaxial.axial_strain, or move the window: triaxial.cv_from, triaxial.cv_to)";
   // A window where the volume jumps (the dilatancy angle near its +-90 deg bounds) or
-  // the stress ratio swings by tens of degrees is no slow approach to a critical state
-  // that more strain would reach: a collapse, a gas, a sample too small for the rate.
+  // the stress ratio scatters by tens of degrees about its trend (the drift's standard
+  // error, not its size: a steady post-peak fall of 10 deg is what more strain cures)
+  // is no slow approach to a critical state: a collapse, a gas, a sample too small for
+  // the rate.
   const std::string swing_advice =
       " (phi_mob and the volume swing rather than drift: the shear is too fast or the sample too small for a "
       "steady state, so a lower triaxial.strain_rate or more triaxial.particles, not more strain)";
@@ -458,7 +460,7 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
     if (std::abs(res.cv_drift_deg) > cfg.cv_drift_tolerance_deg && std::abs(res.cv_drift_deg) > 2.0 * res.cv_drift_se_deg)
       why.push_back(std::string("phi_mob ") + (res.cv_drift_deg < 0 ? "falls" : "rises") + " by " +
                     fmt(std::abs(res.cv_drift_deg), 2) + " +- " + fmt(res.cv_drift_se_deg, 2) + " deg across the window");
-    const bool swings = std::abs(res.cv_dilatancy_deg) >= 45.0 || std::abs(res.cv_drift_deg) >= 10.0;
+    const bool swings = std::abs(res.cv_dilatancy_deg) >= 45.0 || res.cv_drift_se_deg >= 5.0;
     if (!why.empty())
       res.outcome.warnings.push_back("not at critical state over " + window + ": " + why.front() +
                                      (why.size() > 1 ? " and " + why.back() : std::string()) +
@@ -469,8 +471,8 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
         "the critical-state window (" + window + ") holds " + std::to_string(e1.size()) + " series row" +
         (e1.size() == 1 ? "" : "s") + ", fewer than " + std::to_string(TriaxialResult::kMinWindowRows) +
         ": too few to judge whether the sample is at critical state there or to give phi_cv a standard error "
-        "(phi_cv_se_deg not measured; sample the series more finely: triaxial.sample_strain or "
-        "triaxial.sample_steps, or widen the window: triaxial.cv_from, triaxial.cv_to)");
+        "(phi_cv_se_deg not measured: sample the series more finely, triaxial.sample_strain or "
+        "triaxial.sample_steps, or widen the window, triaxial.cv_from and triaxial.cv_to)");
     return;
   }
   if (res.cv_effective_samples < 4.0)
@@ -840,8 +842,11 @@ std::string why_invalid(const TriaxialConfig& cfg, const TriaxialResult& res) {
            " over the critical-state window (below " + fmt(cfg.invalid_coordination) +
            ": fewer than one contact for eight grains, a collisional gas, not a solid at critical state)" + remedy;
   if (res.phi_cv_deg + 2.0 * (std::isfinite(res.phi_cv_se_deg) ? res.phi_cv_se_deg : 0.0) < 0.0)
-    return "no shear strength: phi_cv is negative (" + fmt(res.phi_cv_deg, 2) + " +- " + fmt(res.phi_cv_se_deg, 2) +
-           " deg, below zero by more than two standard errors), the axial stress fell below the confining one over "
+    return "no shear strength: phi_cv is negative (" + fmt(res.phi_cv_deg, 2) +
+           (std::isfinite(res.phi_cv_se_deg) ? " +- " + fmt(res.phi_cv_se_deg, 2) +
+                                                   " deg, below zero by more than two standard errors"
+                                             : std::string(" deg, its standard error not measured")) +
+           "), the axial stress fell below the confining one over "
            "the critical-state window, which no critical state does: the sample is too small or sheared too fast to "
            "have one" + remedy;
   return "";
@@ -913,7 +918,7 @@ void warn_about_the_regime(const TriaxialConfig& cfg, TriaxialResult& res) {
     res.outcome.warnings.push_back("the contact network was sparse over the critical-state window: mean coordination "
                                    "number " + fmt(res.cv_coordination, 3) + ", below " +
                                    fmt(TriaxialResult::kSparseCoordination) +
-                                   " (most grains touched no other), so the walls' stress measures a collisional flow "
+                                   " (many grains touched no other), so the walls' stress measures a collisional flow "
                                    "more than a critical state (a lower triaxial.strain_rate or "
                                    "triaxial.scaled_density, more triaxial.particles)");
   if (res.cv_rows_in_extension > 0)
@@ -966,16 +971,27 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
 // critical step the stabilise stage kept an unbalanced-force ratio of 0.02-0.05 for
 // 400,000 steps, with the preparation's damping at 0.3 or 0.6; at 0.41 (the default
 // dt_factor 0.3) it settles in a few thousand.
-std::string not_converged_context(const TriaxialConfig& cfg, const TriaxialResult& res, const std::string& message) {
-  if (!(res.dt_critical > 0.0) || res.dt / res.dt_critical <= TriaxialConfig::kJitterStepFraction) {
-    if (message.find("prep_step_budget") != std::string::npos) return "";  // the stage's own advice
-    return "; a larger triaxial.prep_step_budget (" + std::to_string(cfg.prep_step_budget) +
-           " steps) gives the stage more time";
+std::string not_converged_context(const TriaxialConfig& cfg, const TriaxialResult& res, const std::string& stage,
+                                  const std::string& message) {
+  if (stage == "shear") return "";  // its budget follows from the strain, not from prep_step_budget
+  const bool near_limit = res.dt_critical > 0.0 && res.dt / res.dt_critical > TriaxialConfig::kJitterStepFraction;
+  std::string s;
+  // The jitter was measured over the default budget; a shorter one may just be short.
+  if (message.find("prep_step_budget") == std::string::npos &&
+      (!near_limit || cfg.prep_step_budget < TriaxialConfig{}.prep_step_budget))
+    s += "; a larger triaxial.prep_step_budget (" + std::to_string(cfg.prep_step_budget) +
+         " steps) gives the stage more time";
+  if (near_limit) {
+    // A step about 0.4 of the critical one, as the seed material's default is.
+    const double suggest = 0.4 * res.dt_critical;
+    const std::string key = cfg.dt > 0.0 ? "triaxial.dt " + fmt(cfg.dt) + " s" : "triaxial.dt_factor " + fmt(cfg.dt_factor);
+    const std::string fix = cfg.dt > 0.0 ? "a triaxial.dt of about " + fmt(suggest, 3) + " s"
+                                         : "a triaxial.dt_factor of about " + fmt(cfg.dt_factor * suggest / res.dt, 2);
+    s += "; the time step is " + fmt(res.dt / res.dt_critical, 2) + " of an isolated pair's critical step (" + key +
+         "): a grain with several contacts has a lower limit, and a packing stepped this close to it may jitter "
+         "without settling whatever the budget or damping; " + fix + " (0.4 of that step)";
   }
-  return "; the time step is " + fmt(res.dt / res.dt_critical, 2) + " of an isolated pair's critical step "
-         "(triaxial.dt_factor " + fmt(cfg.dt_factor) + "): a grain with several contacts has a lower limit, and a "
-         "packing stepped this close to it jitters without settling whatever the budget or damping; a smaller "
-         "triaxial.dt_factor (the default " + fmt(TriaxialConfig{}.dt_factor) + ")";
+  return s;
 }
 
 }  // namespace
@@ -1022,7 +1038,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   } catch (const StageFailed& e) {
     res.outcome.status = SceneStatus::not_converged;
     res.outcome.failed_stage = rig.stage;
-    res.outcome.message = e.what() + not_converged_context(cfg, res, e.what());
+    res.outcome.message = e.what() + not_converged_context(cfg, res, rig.stage, e.what());
     finish();
     return res;
   }

@@ -5,6 +5,7 @@
 #include "../scene_resolve.hpp"
 
 #include "engine/errors.hpp"
+#include "engine/format.hpp"
 #include "engine/scenes/triaxial.hpp"
 
 #include <algorithm>
@@ -267,12 +268,18 @@ std::string advice(const nlohmann::json& p) {
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
   // 0.83 did not settle, and 400 grains at 0.55 and 0.62 jittered without settling.
   const engine::StepForecast f = c.step_forecast();
-  if (!f.exceeds() && f.dt > engine::TriaxialConfig::kJitterStepFraction * f.dt_critical)
+  if (!f.exceeds() && f.dt > engine::TriaxialConfig::kJitterStepFraction * f.dt_critical) {
+    // A concrete step, 0.4 of the limit (the default's margin for the seed's material;
+    // a wider grading or a stiffer rolling spring puts the default itself past 0.5).
+    const double suggest = 0.4 * f.dt_critical;
     next_note(os, 3) << "dt is " << f.dt / f.dt_critical
        << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
           "that limit, and above about " << engine::TriaxialConfig::kJitterStepFraction
-       << " of it the preparation may not settle, or blow up (triaxial.dt_factor; the default "
-       << engine::TriaxialConfig{}.dt_factor << ")";
+       << " of it the preparation may not settle, or blow up; "
+       << (c.dt > 0.0 ? "a triaxial.dt of about " + engine::fmt(suggest, 3) + " s"
+                      : "a triaxial.dt_factor of about " + engine::fmt(c.dt_factor * suggest / f.dt, 2))
+       << " keeps it at 0.4 of that limit";
+  }
   // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
   // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
   // valid setting takes about 5,000.
@@ -314,32 +321,44 @@ std::string advice(const nlohmann::json& p) {
   // Loose enough, a stage "reaches equilibrium" at once: 0.99 both stopped the dense
   // compression after 2,000 steps at box porosity 0.494, and the sample went on as dense.
   const engine::TriaxialConfig d;
-  if (c.ufr_tolerance > 10.0 * d.ufr_tolerance || c.stress_tolerance > 10.0 * d.stress_tolerance)
-    next_note(os, 3) << "triaxial.ufr_tolerance " << c.ufr_tolerance << " and stress_tolerance " << c.stress_tolerance
-       << " let a preparation stage end with the forces that far out of balance and the walls' stress that far from "
-          "its target: the sample is not the packing asked for (the defaults: "
-       << d.ufr_tolerance << " and " << d.stress_tolerance << ")";
+  std::string loose;
+  if (c.ufr_tolerance > 10.0 * d.ufr_tolerance)
+    loose += "triaxial.ufr_tolerance " + engine::fmt(c.ufr_tolerance) + " (the forces that far out of balance)";
+  if (c.stress_tolerance > 10.0 * d.stress_tolerance)
+    loose += (loose.empty() ? "" : " and ") + std::string("triaxial.stress_tolerance ") +
+             engine::fmt(c.stress_tolerance) + " (the walls' stress that far from its target)";
+  if (!loose.empty())
+    next_note(os, 3) << loose << " let a preparation stage end that far from equilibrium: the sample is not the "
+       << "packing asked for (the defaults: " << d.ufr_tolerance << " and " << d.stress_tolerance << ")";
   // Rows every sample_steps steps replace rows every sample_strain of strain: tasks
   // that differ only in sample_strain then store the same series under different keys.
   if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)
     next_note(os, 6) << "triaxial.sample_strain (" << c.sample_strain << ") is not used: a row is taken every "
        << "triaxial.sample_steps (" << c.sample_steps << ") steps of shear instead";
-  // A series too coarse for what the run judges from it: the peak needs a few rows
-  // (its running mean takes 5), the critical-state window at least 3 (one row has a
-  // standard error of 0 and no trend). The run warns too; this says so before it.
+  // A series too coarse for what the run judges from it: the peak needs 5 rows (its
+  // running mean takes 5), the critical-state window 3 (one row has a standard error
+  // of 0 and no trend). Counted as the shear records them: a row at eps1 = 0, one
+  // every row_strain (a hair short of it, so that a row on the window's lower edge
+  // falls outside), and one at the end.
   const double row_strain =
       c.sample_steps > 0 && f.dt > 0.0 ? static_cast<double>(c.sample_steps) * c.strain_rate * f.dt : c.sample_strain;
   if (row_strain > 0.0) {
-    const double window_rows = (c.cv_to - c.cv_from) / row_strain;
-    const double shear_rows = c.axial_strain / row_strain;
-    if (window_rows < engine::TriaxialResult::kMinWindowRows || shear_rows < engine::TriaxialResult::kPeakSmoothingRows)
-      next_note(os, 3) << "the series takes a row every " << row_strain << " of strain"
-         << (c.sample_steps > 0 ? " (triaxial.sample_steps)" : " (triaxial.sample_strain)") << ", and the shear ("
-         << c.axial_strain << ") spans " << shear_rows << " of those, the critical-state window (eps1 " << c.cv_from
-         << "-" << c.cv_to << ") " << window_rows << ": fewer than " << engine::TriaxialResult::kPeakSmoothingRows
-         << " rows over the shear or " << engine::TriaxialResult::kMinWindowRows
-         << " in the window cannot locate the peak or judge the window (the run will warn, and phi_cv_se_deg will "
-            "not be measured); sample more finely";
+    const auto rows_to = [&](double e) { return std::floor(e / row_strain + 1e-9); };
+    const bool end_row = c.axial_strain / row_strain - rows_to(c.axial_strain) > 1e-9;
+    const double shear_rows = rows_to(c.axial_strain) + 1.0 + (end_row ? 1.0 : 0.0);
+    const double window_rows = rows_to(std::min(c.cv_to, c.axial_strain)) - rows_to(c.cv_from) +
+                               (end_row && c.cv_to >= c.axial_strain ? 1.0 : 0.0);
+    const std::string every = "the series takes a row every " + engine::fmt(row_strain) + " of strain (" +
+                              (c.sample_steps > 0 ? "triaxial.sample_steps" : "triaxial.sample_strain") + ")";
+    if (window_rows < engine::TriaxialResult::kMinWindowRows)
+      next_note(os, 3) << every << ": about " << window_rows << " in the critical-state window (eps1 " << c.cv_from
+         << "-" << c.cv_to << "), fewer than " << engine::TriaxialResult::kMinWindowRows
+         << ", which cannot judge it (the run will warn, and phi_cv_se_deg will not be measured); sample more finely "
+            "or widen the window";
+    if (shear_rows < engine::TriaxialResult::kPeakSmoothingRows)
+      next_note(os, 3) << every << ": about " << shear_rows << " over the shear, fewer than "
+         << engine::TriaxialResult::kPeakSmoothingRows << ", which cannot locate the peak (the run will warn); sample "
+            "more finely";
   }
   return os.str();
 }

@@ -229,7 +229,7 @@ TEST(CalibrateMap, TooFewPointsSaysWhyTheOthersHaveNone) {
     FAIL() << "a surface on 2 points";
   } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
-    EXPECT_NE(what.find("needs at least 4 points with data, got 2 (7 grid point(s) have none: their tasks 6 failed, "
+    EXPECT_NE(what.find("needs at least 4 points with data, got 2 (7 grid point(s) have no data: their tasks 6 failed, "
                         "1 not finished; demcal status shows why tasks failed)"),
               std::string::npos)
         << what;

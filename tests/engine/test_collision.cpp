@@ -49,10 +49,12 @@ TEST(CollisionScene, BeyondTheCriticalStepIsRefusedUnlessAStudyAsksForIt) {
   EXPECT_GT(r.dt / r.dt_critical, 1.0);
   EXPECT_FALSE(r.outcome.ok() && r.max_relative_error < 1e-2) << "an unstable step went unnoticed";
   // Whichever way it ended, it says that the step was past the limit and what to change.
-  if (r.outcome.ok())
+  if (r.outcome.ok()) {
     EXPECT_NE(r.outcome.message.find("x the critical step (normal), allowed by collision.allow_unstable_dt"),
               std::string::npos)
         << r.outcome.message;
+    for (const auto& w : r.outcome.warnings) EXPECT_EQ(w.find("; "), std::string::npos) << "joined with '; ': " << w;
+  }
   else
     EXPECT_NE(r.outcome.message.find("a smaller collision.dt_factor"), std::string::npos) << r.outcome.message;
 }

@@ -781,15 +781,31 @@ TEST(TriaxialReposeScenes, ACoarseSeriesAndAStepNearTheLimitAreNoted) {
   EXPECT_EQ(notes_of(j).find("the series takes a row"), std::string::npos) << notes_of(j);
   EXPECT_EQ(notes_of(j).find("of the critical step"), std::string::npos) << notes_of(j);
   j["triaxial"]["sample_strain"] = j["triaxial"].value("axial_strain", 0.30) / 2;
-  EXPECT_NE(notes_of(j).find("cannot locate the peak or judge the window"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("about 1 in the critical-state window (eps1 0.2-0.3), fewer than 3, which cannot judge it"),
+            std::string::npos)
+      << notes_of(j);
+  EXPECT_NE(notes_of(j).find("about 3 over the shear, fewer than 5, which cannot locate the peak"), std::string::npos)
+      << notes_of(j);
+  // Counted as the run records them: a row at 0 and one every 0.075 give 5 over the
+  // shear and 3 in a window from 0.1 (0.15, 0.225, 0.3): nothing to note.
+  j["triaxial"]["sample_strain"] = 0.075;
+  j["triaxial"]["cv_from"] = 0.1;
+  EXPECT_EQ(notes_of(j).find("the series takes a row"), std::string::npos) << notes_of(j);
+  j["triaxial"].erase("cv_from");
   j["triaxial"].erase("sample_strain");
   j["triaxial"]["dt_factor"] = 0.45;
   EXPECT_NE(notes_of(j).find("of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
   EXPECT_NE(notes_of(j).find("above about 0.5 of it the preparation may not settle"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("a triaxial.dt_factor of about 0.29 keeps it at 0.4 of that limit"), std::string::npos)
+      << notes_of(j);
   // Equilibrium tolerances loose enough that a stage ends at once.
   j["triaxial"].erase("dt_factor");
   j["triaxial"]["ufr_tolerance"] = 0.5;
-  EXPECT_NE(notes_of(j).find("the sample is not the packing asked for"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("triaxial.ufr_tolerance 0.5 (the forces that far out of balance) let a preparation stage "
+                             "end that far from equilibrium: the sample is not the packing asked for"),
+            std::string::npos)
+      << notes_of(j);
+  EXPECT_EQ(notes_of(j).find("stress_tolerance 0.01"), std::string::npos) << notes_of(j);
 }
 
 // A repose column whose own weight presses deep overlaps at a scaled-down stiffness,
