@@ -1,4 +1,5 @@
 // The fidelity studies (triaxial and repose): one knob at a time around a baseline (issue 9).
+#include "excerpt.hpp"
 #include "metric.hpp"
 #include "db/store.hpp"
 #include "study.hpp"
@@ -498,7 +499,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
           ++s.finished;
           if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
             ++s.warned;
-            s.not_critical += w.find("not at critical state") != std::string::npos;
+            s.not_critical += says_not_at_critical_state(w);
             s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
           }
         }

@@ -324,7 +324,7 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
         p.tasks.push_back(row.r.task.id);
         const std::string w = db::task_message(row.r.task).warning;
         if (!w.empty() && rs.warned++ == 0) rs.first_warning = w;
-        if (uses_cv && w.find("not at critical state") != std::string::npos) ++rs.not_critical;
+        if (uses_cv && says_not_at_critical_state(w)) ++rs.not_critical;
         if (uses_peak && peak_on_a_spike(row.r.metrics)) {
           ++rs.on_spike;
           ++p.spiked;

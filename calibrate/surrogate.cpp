@@ -225,10 +225,10 @@ Surrogate fit_surrogate(const ResponseSurface& rs) {
       y.push_back(p.mean);
       w.push_back(p.n());
     }
-  if (th.size() >= 4) return fit_surrogate(th, et, y, w, rs.box());
   try {
     return fit_surrogate(th, et, y, w, rs.box());
   } catch (const std::invalid_argument& e) {
+    if (th.size() >= 4) throw;  // another refusal: the points' count is not its reason
     // Too few points: say why the other grid points have no value, as the count
     // alone hides that most tasks failed.
     GridPoint why;

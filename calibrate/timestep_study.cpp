@@ -281,16 +281,20 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   // factor is noisy, and a lucky pass beyond a failure is no recommendation. Nor past
   // the full law's critical step: the dilute gas's brief contacts may survive it, but
   // the engine refuses it for a job, and a dense pack would not.
+  // The runs with friction and rolling at a frictionless point's factor (null: none).
+  const auto friction_run = [&](const TimestepPoint& p) -> const TimestepPoint* {
+    const auto it = std::find_if(s.points.begin(), s.points.end(),
+                                 [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
+    return it == s.points.end() ? nullptr : &*it;
+  };
   for (const auto& p : s.points) {
     if (p.friction) continue;
     if (p.dt_factor > s.critical_factor_full) {
       s.capped_at_critical = s.recommended_factor > 0 && p.ok && std::abs(p.drift) <= s.tolerance;
       break;
     }
-    const auto fr = std::find_if(s.points.begin(), s.points.end(),
-                                 [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
-    const bool pass = p.ok && std::abs(p.drift) <= s.tolerance && fr != s.points.end() && fr->ok &&
-                      fr->drift <= s.tolerance;
+    const TimestepPoint* fr = friction_run(p);
+    const bool pass = p.ok && std::abs(p.drift) <= s.tolerance && fr && fr->ok && fr->drift <= s.tolerance;
     if (!pass) break;  // points are sorted by factor within the series
     s.recommended_factor = p.dt_factor;
   }
@@ -309,20 +313,18 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   } else {
     // Why the smallest factor failed: every factor up to a recommendation must pass.
     std::string why = "no run finished";
-    for (const auto& p : s.points) {
-      if (p.friction) continue;
-      const auto fr = std::find_if(s.points.begin(), s.points.end(),
-                                   [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
-      if (!p.ok)
+    const auto p = std::find_if(s.points.begin(), s.points.end(), [](const TimestepPoint& q) { return !q.friction; });
+    if (p != s.points.end()) {
+      const TimestepPoint* fr = friction_run(*p);
+      if (!p->ok)
         why = "the frictionless runs went unstable";
-      else if (std::abs(p.drift) > s.tolerance)
-        why = "the frictionless runs drifted by " + fmt(p.drift, 3) + " per simulated second";
-      else if (fr == s.points.end() || !fr->ok)
+      else if (std::abs(p->drift) > s.tolerance)
+        why = "the frictionless runs drifted by " + fmt(p->drift, 3) + " per simulated second";
+      else if (!fr || !fr->ok)
         why = "the runs with friction and rolling went unstable";
       else
         why = "the runs with friction and rolling gained " + fmt(fr->drift, 3) + " per simulated second";
-      why = "already at the smallest factor, " + fmt(p.dt_factor) + ", " + why;
-      break;
+      why = "already at the smallest factor, " + fmt(p->dt_factor) + ", " + why;
     }
     rec << "no dt_factor passed at tolerance " << fmt(s.tolerance) << " per simulated second: " << why
         << " (a factor is recommended only if it and every smaller one pass)";

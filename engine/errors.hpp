@@ -9,12 +9,14 @@ namespace demcal::engine {
 // A config field is missing, non-finite or out of range. `field` names it.
 class ConfigError : public std::invalid_argument {
  public:
-  ConfigError(std::string field, const std::string& reason)
-      : std::invalid_argument(field + ": " + reason), field_(std::move(field)) {}
+  ConfigError(std::string field, std::string reason)
+      : std::invalid_argument(field + ": " + reason), field_(std::move(field)), reason_(std::move(reason)) {}
   const std::string& field() const { return field_; }
+  // Without the field: for a caller that re-raises it under a key of its own.
+  const std::string& reason() const { return reason_; }
 
  private:
-  std::string field_;
+  std::string field_, reason_;
 };
 
 // The requested time step exceeds the stability limit of a mode of the contact law.

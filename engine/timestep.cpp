@@ -142,11 +142,11 @@ StabilityLimits stability_limits(const World& world, const ContactParams& law_in
 void check_timestep(double dt, const StabilityLimits& limits) {
   const ModeLimit& g = limits.governing();
   if (dt > g.dt_critical) {
+    const std::string factor = fmt(g.dt_critical / limits.base_step);
     throw TimestepError(g.mode, dt, g.dt_critical,
                         "time step " + fmt(dt) + " s exceeds the critical step of the " + g.mode + " mode (" +
-                            g.contact + "): " + fmt(g.dt_critical) + " s = " +
-                            fmt(g.dt_critical / limits.base_step) + " * sqrt(m_min/Kn); a dt_factor of at most " +
-                            fmt(g.dt_critical / limits.base_step) +
+                            g.contact + "): " + fmt(g.dt_critical) + " s = " + factor +
+                            " * sqrt(m_min/Kn); a dt_factor of at most " + factor +
                             ", and well below it (a grain with several contacts has a lower limit)");
   }
 }

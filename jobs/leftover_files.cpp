@@ -54,6 +54,10 @@ std::string part_file_pid(const std::string& name) {
 
 }  // namespace
 
+std::string leftovers_removed_line(int n, const std::filesystem::path& dir) {
+  return "removed " + std::to_string(n) + " partial file(s) left in " + dir.string() + "/ by runners that are gone";
+}
+
 int remove_leftovers_of_dead_runners(const std::filesystem::path& dir, db::Store& store, const std::string& own_tag,
                                      BeatWatch* watch) {
   std::map<std::string, std::string> token_of_tag;

@@ -24,4 +24,7 @@ class BeatWatch;
 int remove_leftovers_of_dead_runners(const std::filesystem::path& dir, db::Store& store, const std::string& own_tag,
                                      BeatWatch* watch);
 
+// What a run says when it removed `n` such files from `dir` (no newline).
+std::string leftovers_removed_line(int n, const std::filesystem::path& dir);
+
 }  // namespace demcal::jobs

@@ -206,7 +206,7 @@ RunSummary farm(db::Store& store, const Job& job, const RunOptions& options, con
   if (int n = requeue_dead_runners(store))
     log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (int n = remove_leftovers_of_dead_runners(dir, store, file_name_safe(token), nullptr))
-    log << "removed " << n << " partial file(s) left in " << dir.string() << "/ by runners that are gone\n";
+    log << leftovers_removed_line(n, dir) << "\n";
   if (options.retry_failed)
     if (int n = store.reset_failed(job_id)) log << "retrying " << n << " failed task(s)\n";
   std::deque<db::TaskRow> queue;

@@ -129,7 +129,7 @@ void Runner::prepare() {
   if (int n = requeue_dead_runners(store_, &beats_))
     *opt_.log << "re-queued " << n << " task(s) left running by a runner that is gone\n";
   if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
-    *opt_.log << "removed " << n << " partial file(s) left in " << dir_.string() << "/ by runners that are gone\n";
+    *opt_.log << leftovers_removed_line(n, dir_) << "\n";
   if (opt_.retry_failed)
     if (int n = store_.reset_failed(job_id)) *opt_.log << "retrying " << n << " failed task(s)\n";
   refill_queue();
@@ -482,9 +482,7 @@ RunSummary Runner::run_loop() {
       if (requeued || now - last_swept > std::chrono::duration<double>(kRunnerBeatS)) {
         last_swept = now;
         if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
-          progress_.line("removed " + std::to_string(n) + " partial file(s) left in " + dir_.string() +
-                             "/ by runners that are gone",
-                         read_counts());
+          progress_.line(leftovers_removed_line(n, dir_), read_counts());
       }
     }
     if (now - last_file_check > std::chrono::seconds(2)) {

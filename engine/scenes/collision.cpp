@@ -91,7 +91,6 @@ void warn_unchecked_growth(const CollisionConfig& cfg, CollisionResult& res) {
                                  "energy (the " + fmt(100.0 * limit) + "% check of collision.energy_guard was off): the "
                                  "integration created it at dt = " + fmt(res.dt / res.dt_critical, 3) +
                                  " x the critical step (" + res.critical_mode + ")");
-  res.outcome.message = res.outcome.warnings.back();
 }
 
 // A step past the critical one (allowed by allow_unstable_dt) that showed no
@@ -105,7 +104,6 @@ void warn_past_critical(CollisionResult& res) {
                                  "within these " + std::to_string(res.steps_done) + " steps, but this is no stable "
                                  "step (friction's dissipation or brief contacts can hide the growth, which a denser "
                                  "or longer run would show)");
-  res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + res.outcome.warnings.back();
 }
 
 }  // namespace
@@ -132,7 +130,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   try {
     insert_random(p, radii, lo, hi, mat.density, rng);
   } catch (const ConfigError& e) {  // the insertion's own words name no key of this scene
-    throw ConfigError("collision.solid_fraction", std::string(e.what()).substr(e.field().size() + 2) +
+    throw ConfigError("collision.solid_fraction", e.reason() +
                                                       " (random insertion at collision.solid_fraction " +
                                                       fmt(cfg.solid_fraction) + "): a lower solid_fraction");
   }
@@ -212,6 +210,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   if (!res.outcome.ok()) res.drift_per_million_steps = res.drift_per_simulated_second = INFINITY;
   warn_unchecked_growth(cfg, res);
   warn_past_critical(res);
+  res.outcome.join_warnings();
   return res;
 }
 

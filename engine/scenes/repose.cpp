@@ -433,7 +433,7 @@ Fill fill_column(const ReposeConfig& cfg, const ReposeSizes& z, const Floor& flo
                   {false, periodic_y, false});
   } catch (const ConfigError& e) {  // the insertion's own words name no key of this scene
     throw ConfigError("repose.fill_solid_fraction",
-                      std::string(e.what()).substr(e.field().size() + 2) +
+                      e.reason() +
                           " (the column's grains are inserted at random at repose.fill_solid_fraction " +
                           fmt(cfg.fill_solid_fraction) + " in a slab of repose.depth_diameters " +
                           fmt(cfg.slab_depth_diameters) + " mean diameters" +
@@ -877,10 +877,7 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
     res.outcome.message = e.what();
   }
   res.steps = run.steps_total;
-  for (const auto& wmsg : res.outcome.warnings) {
-    if (!res.outcome.message.empty()) res.outcome.message += "; ";
-    res.outcome.message += wmsg;
-  }
+  res.outcome.join_warnings();
   res.wall_seconds = clock.wall_seconds();
   res.cpu_seconds = clock.cpu_seconds();
   if (obs) obs->on_progress(1.0);

@@ -29,6 +29,11 @@ struct SceneOutcome {
   std::string message;       // why it failed, or warnings when ok
   std::vector<std::string> warnings;
   bool ok() const { return status == SceneStatus::ok; }
+  // Appends the warnings to the message, "; " between them: the text a task stores
+  // (which is why no warning may contain "; ").
+  void join_warnings() {
+    for (const auto& w : warnings) message += (message.empty() ? "" : "; ") + w;
+  }
 };
 
 using Metrics = std::vector<std::pair<std::string, double>>;

@@ -982,14 +982,14 @@ std::string not_converged_context(const TriaxialConfig& cfg, const TriaxialResul
     s += "; a larger triaxial.prep_step_budget (" + std::to_string(cfg.prep_step_budget) +
          " steps) gives the stage more time";
   if (near_limit) {
-    // A step about 0.4 of the critical one, as the seed material's default is.
-    const double suggest = 0.4 * res.dt_critical;
+    const double suggest = TriaxialConfig::kSuggestedStepFraction * res.dt_critical;
     const std::string key = cfg.dt > 0.0 ? "triaxial.dt " + fmt(cfg.dt) + " s" : "triaxial.dt_factor " + fmt(cfg.dt_factor);
     const std::string fix = cfg.dt > 0.0 ? "a triaxial.dt of about " + fmt(suggest, 3) + " s"
                                          : "a triaxial.dt_factor of about " + fmt(cfg.dt_factor * suggest / res.dt, 2);
     s += "; the time step is " + fmt(res.dt / res.dt_critical, 2) + " of an isolated pair's critical step (" + key +
          "): a grain with several contacts has a lower limit, and a packing stepped this close to it may jitter "
-         "without settling whatever the budget or damping; " + fix + " (0.4 of that step)";
+         "without settling whatever the budget or damping; " + fix + " (" +
+         fmt(TriaxialConfig::kSuggestedStepFraction) + " of that step)";
   }
   return s;
 }
@@ -1055,7 +1055,7 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   }
   judge_the_interior(cfg, res);
   warn_about_the_regime(cfg, res);
-  for (const auto& w : res.outcome.warnings) res.outcome.message += (res.outcome.message.empty() ? "" : "; ") + w;
+  res.outcome.join_warnings();
   finish();
   if (obs) obs->on_progress(1.0);
   return res;

@@ -92,6 +92,9 @@ struct TriaxialConfig {
   // Above this fraction of an isolated pair's critical step a dense packing may
   // jitter without settling (not_converged_context in triaxial.cpp, measured there).
   static constexpr double kJitterStepFraction = 0.5;
+  // The step the run and validate suggest past it: this fraction of the critical step,
+  // the default dt_factor's margin on the seed's material (0.3 of sqrt(m_min/Kn) = 0.41).
+  static constexpr double kSuggestedStepFraction = 0.4;
   // Step of the dense preparation's frictionless stages (compression, unloading) as a
   // multiple of dt. 0: the ratio of the frictionless law's critical step to that of
   // the material's full law (tangential and rolling springs, the stiff modes the

@@ -269,16 +269,16 @@ std::string advice(const nlohmann::json& p) {
   // 0.83 did not settle, and 400 grains at 0.55 and 0.62 jittered without settling.
   const engine::StepForecast f = c.step_forecast();
   if (!f.exceeds() && f.dt > engine::TriaxialConfig::kJitterStepFraction * f.dt_critical) {
-    // A concrete step, 0.4 of the limit (the default's margin for the seed's material;
-    // a wider grading or a stiffer rolling spring puts the default itself past 0.5).
-    const double suggest = 0.4 * f.dt_critical;
+    // A concrete step (a wider grading or a stiffer rolling spring puts the default
+    // itself past the fraction noted here).
+    const double suggest = engine::TriaxialConfig::kSuggestedStepFraction * f.dt_critical;
     next_note(os, 3) << "dt is " << f.dt / f.dt_critical
        << " of the critical step of an isolated pair (" << f.mode << "): a packed grain's several contacts lower "
           "that limit, and above about " << engine::TriaxialConfig::kJitterStepFraction
        << " of it the preparation may not settle, or blow up; "
        << (c.dt > 0.0 ? "a triaxial.dt of about " + engine::fmt(suggest, 3) + " s"
                       : "a triaxial.dt_factor of about " + engine::fmt(c.dt_factor * suggest / f.dt, 2))
-       << " keeps it at 0.4 of that limit";
+       << " keeps it at " << engine::TriaxialConfig::kSuggestedStepFraction << " of that limit";
   }
   // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
   // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
