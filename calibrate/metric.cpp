@@ -72,12 +72,13 @@ std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std
 }
 
 bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics) {
-  double peak = NAN, smoothed = NAN;
+  double peak = NAN, smoothed = NAN, rows_to_end = NAN;
   for (const auto& [name, value] : metrics) {
     if (name == "phi_peak_deg") peak = value;
     if (name == "phi_peak_smoothed_deg") smoothed = value;
+    if (name == "phi_peak_rows_to_end") rows_to_end = value;
   }
-  return engine::TriaxialResult::peak_on_a_spike(peak, smoothed);
+  return engine::TriaxialResult::peak_on_a_spike(peak, smoothed, rows_to_end);
 }
 
 std::string spike_rule() {

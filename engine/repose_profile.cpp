@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 namespace demcal::engine {
 namespace {
@@ -240,6 +241,44 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
   h.front_change_m = hi - lo;
   h.front_excursion_m = *std::max_element(fronts.begin(), fronts.end()) - *std::min_element(fronts.begin(), fronts.end());
   return h;
+}
+
+double still_since(const std::vector<double>& time, const std::vector<double>& front_x,
+                   const std::vector<double>& angle_deg, double from, double earliest, double angle_tol_deg,
+                   double front_tol_m) {
+  double since = heap_stillness(time, front_x, angle_deg, from, earliest).since;
+  std::size_t k = 0;
+  while (k < time.size() && time[k] < from) ++k;
+  while (k-- > 0 && time[k] >= earliest) {
+    const HeapStillness h = heap_stillness(time, front_x, angle_deg, time[k], earliest);
+    if (!h.judged || h.angle_change_deg > angle_tol_deg || h.front_change_m > front_tol_m) break;
+    since = time[k];
+  }
+  return since;
+}
+
+std::vector<std::string> slope_doubts(const SlopeFit& fit, double d_mean, double bin, double end_wall_x,
+                                      bool reached_end_wall) {
+  std::vector<std::string> doubts;
+  if (!fit.ok) return doubts;
+  std::ostringstream os;
+  if (fit.h_max < kMinHeapDiameters * d_mean) {
+    os << "the deposit is " << fit.h_max / d_mean << " mean diameters high (below " << kMinHeapDiameters
+       << "): a layer of grains, not a heap, and its fitted angle is not an angle of repose (a taller "
+       << "repose.column_height, or more friction or rolling resistance)";
+    doubts.push_back(os.str());
+  } else if (std::abs(fit.angle_deg) < 2.0 * fit.angle_err_deg) {
+    os << "the fitted slope, " << fit.angle_deg << " +- " << fit.angle_err_deg
+       << " deg, is not told apart from flat (under two standard errors)";
+    doubts.push_back(os.str());
+  }
+  if (reached_end_wall && fit.x_lower + 2.0 * bin >= end_wall_x) {
+    std::ostringstream wall;
+    wall << "the fitted slope's foot, at " << fit.x_lower << " m, is within two bins of the end wall at " << end_wall_x
+         << " m: the heap leans on the wall, and its angle is not a free slope's (a longer repose.domain_length)";
+    doubts.push_back(wall.str());
+  }
+  return doubts;
 }
 
 }  // namespace demcal::engine

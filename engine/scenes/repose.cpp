@@ -229,6 +229,14 @@ void ReposeConfig::validate() const {
   positive(gravity, "repose.gravity");
   if (!std::isfinite(energy_guard)) throw ConfigError("numerics.energy_guard", "must be finite");
   non_negative(bin_width, "repose.bin_width");
+  // The profile bins grains by their centres: a bin narrower than the smallest grain
+  // is often empty, and the fit's walk down the slope stops at the first empty bin
+  // (1e-4 m bins on 1-2 mm grains fitted 4 bins of the crest's face: 85 deg).
+  if (bin_width > 0.0 && bin_width < material.d_min)
+    throw ConfigError("repose.bin_width", fmt(bin_width) + " m is narrower than the smallest grain (material.d_min " +
+                                              fmt(material.d_min) + " m): the profile bins grains by their centres, so "
+                                              "such bins are left empty and cut the fitted slope short; give at least "
+                                              "d_min, or 0 for the mean diameter");
   if (!(fit_lo >= 0.0 && fit_lo < fit_hi && fit_hi <= 1.0))
     throw ConfigError("repose.fit_fractions", "need 0 <= fit_lo < fit_hi <= 1");
   non_negative(steep_window, "repose.steep_window");
@@ -662,6 +670,9 @@ std::string judge_by_profile(const ReposeConfig& cfg, double time_now, double bi
     res.profile_angle_change_deg = still.angle_change_deg;
     res.profile_front_change_m = still.front_change_m;
     res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
+    if (res.rest_by_profile)
+      still.since = still_since(col("time"), col("front_x"), col("repose_deg"), still.since, cfg.min_collapse_time,
+                                cfg.rest_profile_tol_deg, bin);
     note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by " << still.angle_change_deg
          << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by " << still.front_change_m
          << " m (the spread of its lowest value in each sixth of the window; tolerance one bin, " << bin << " m)";
@@ -699,12 +710,16 @@ void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapRe
     res.repose_deg = NAN;
     res.outcome.status = SceneStatus::invalid;
     res.outcome.failed_stage = "measure";
-    res.outcome.message = "no angle of repose: " + fit.why + " (a larger column, or a narrower repose.bin_width)";
+    res.outcome.message = "no angle of repose: " + fit.why +
+                          (res.reached_end_wall ? " (the grains reached the end wall: a longer repose.domain_length)"
+                                                : " (a larger column, or a narrower repose.bin_width)");
     return;
   }
   res.repose_deg = fit.angle_deg;
   res.repose_fit_err_deg = fit.angle_err_deg;
   res.fit_points = fit.points;
+  for (std::string& doubt : slope_doubts(fit, z.d_mean, z.bin, z.L, res.reached_end_wall))
+    res.outcome.warnings.push_back(std::move(doubt));
   // A heap a few grains across has a line through it, not a slope: a 6 mm column of
   // 34 grains read 12.3 +- 9.3 deg over 4 bins, with nothing said.
   if (fit.points < ReposeResult::kMinSlopeBins) {
@@ -764,10 +779,11 @@ void finish_collapse(const ReposeConfig& cfg, const ReposeSizes& z, const World&
     return;
   }
   if (res.rest_by_profile) {
-    res.time_to_rest_s = still.since;  // still since at least then
+    res.time_to_rest_s = still.since;
     std::ostringstream os;
     os << "at rest by its profile, not by kinetic energy: at the time limit (" << cfg.time_limit << " s) the "
-       << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the window's start, "
+       << not_at_rest << "; but " << profile_note << ": the angle is the final state's, time_to_rest_s the earliest time from which its angle and front held within "
+       << "those tolerances (" << still.since << " s), "
        << "and the runout where the front stood at the end (a grain at the toe may still move it by a bin or two)";
     res.outcome.warnings.push_back(os.str());
   } else {

@@ -12,7 +12,9 @@
 // collapse undamped (energy leaves by friction and plastic rolling only) and
 // spread over a rough floor of fixed grains of the same size distribution, until
 // the kinetic energy per mobile grain stays below a threshold or a time limit is
-// reached; the latter is reported as not_settled, never as a result. A smooth end
+// reached; then the heap is at rest only if its angle and front held still over a
+// last window (rest_by_profile, warned), else the run is not_settled and gives no
+// angle. A smooth end
 // wall at x = domain_length keeps stray grains in the box.
 //
 // Real density, real gravity: this scene is dynamic. The stiffness can be scaled
@@ -163,7 +165,7 @@ struct ReposeResult {
   long grains_beyond_front = 0;  // mobile grains past the deposit's front (left out of the fit)
   double front_m = 0;         // L_inf: front position from the back wall
   double final_height_m = 0;  // deposit height above the floor level
-  double time_to_rest_s = 0;  // after the gate opened (by profile: the time limit)
+  double time_to_rest_s = 0;  // after the gate opened (by profile: from when the angle and front held still)
   bool rest_by_profile = false;  // kinetic energy never passed; the heap's angle and front held still
   double profile_angle_change_deg = 0, profile_front_change_m = 0;  // over the window, when judged
   bool reached_end_wall = false;

@@ -180,6 +180,7 @@ Metrics TriaxialResult::metrics() const {
                      {"phi_peak_interior_deg", phi_peak_interior_deg},
                      {"phi_cv_interior_deg", phi_cv_interior_deg},
                      {"q_peak_pa", q_peak},
+                     {"phi_peak_rows_to_end", static_cast<double>(peak_rows_to_end)},
                      {"porosity_initial", porosity_initial},
                      {"porosity_final", porosity_final},
                      {"porosity_interior_initial", porosity_interior_initial},
@@ -188,6 +189,7 @@ Metrics TriaxialResult::metrics() const {
                      {"max_dilatancy_deg", max_dilatancy_deg},
                      {"max_inertial_number", max_inertial_number},
                      {"lw_wall_mismatch", lw_wall_mismatch},
+                     {"lw_wall_ratio_cv", lw_wall_ratio_cv},
                      {"interior_grains", static_cast<double>(interior_grains)},
                      {"shear_stress_error_mean", shear_stress_error_mean},
                      {"shear_stress_error_max", shear_stress_error_max},
@@ -487,8 +489,25 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
 // kinetic energy up sevenfold as the chain gave way) sets the maximum of the rows
 // without being the material's peak strength.
 void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
+  const bool at_end = res.peak_rows_to_end >= 0 && res.peak_rows_to_end < TriaxialResult::kPeakSmoothingRows / 2;
+  // A loose sample hardens into its critical state: its largest row is one of the
+  // window's (34.0 deg at eps1 0.288, 4.6 deg above phi_cv, read as a peak).
+  if (cfg.in_cv_window(res.eps1_at_peak, cfg.strain_rate * res.dt))
+    res.outcome.warnings.push_back("phi_peak " + fmt(res.phi_peak_deg) + " deg lies at eps1 " +
+                                   fmt(res.eps1_at_peak, 3) + ", inside the critical-state window (eps1 " +
+                                   fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to) +
+                                   "): the sample shows no peak before its critical state (as a loose sample does), "
+                                   "and phi_peak is the highest of the window's scatter, not a peak");
+  else if (at_end)
+    res.outcome.warnings.push_back("phi_mob is largest " +
+                                   std::string(res.peak_rows_to_end == 0 ? "in the series' last row"
+                                                                         : "next to the series' end") +
+                                   " (phi_peak " + fmt(res.phi_peak_deg) + " deg at eps1 " +
+                                   fmt(res.eps1_at_peak, 3) +
+                                   "): it was still rising, and the peak lies beyond the shear (a larger "
+                                   "triaxial.axial_strain)");
   // A NaN smoothed peak (too few rows) tells nothing.
-  if (!TriaxialResult::peak_on_a_spike(res.phi_peak_deg, res.phi_peak_smoothed_deg)) return;
+  if (!TriaxialResult::peak_on_a_spike(res.phi_peak_deg, res.phi_peak_smoothed_deg, res.peak_rows_to_end)) return;
   const std::string span = cfg.sample_steps > 0 ? std::to_string(TriaxialResult::kPeakSmoothingRows) + " rows"
                                                 : fmt(TriaxialResult::kPeakSmoothingRows * cfg.sample_strain) +
                                                       " of strain";
@@ -749,8 +768,9 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   const std::size_t c_e1 = s.column("eps1"), c_ev = s.column("eps_v"), c_s1 = s.column("sigma1"),
                     c_s2 = s.column("sigma2"), c_s3 = s.column("sigma3"), c_q = s.column("q"),
                     c_in = s.column("inertial");
-  const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz");
-  double best = -1.0, best_in = -1.0, cv_in = 0.0;
+  const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz"),
+                    c_lwp = s.column("lw_p"), c_p = s.column("p");
+  double best = -1.0, best_in = -1.0, cv_in = 0.0, lw_ratio = 0.0;
   std::vector<double> sines, cv, cv_e1, cv_ev, cv_phi;
   for (const auto& r : s.rows) {
     const double x = mobilised_sine(r[c_s1], r[c_s2], r[c_s3]);
@@ -760,11 +780,13 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
       best = x;
       res.eps1_at_peak = r[c_e1];
       res.q_peak = r[c_q];
+      res.peak_rows_to_end = static_cast<int>(s.rows.size() - sines.size());
     }
     best_in = std::max(best_in, x_in);
-    if (cfg.in_cv_window(r[c_e1])) {
+    if (cfg.in_cv_window(r[c_e1], cfg.strain_rate * res.dt)) {
       cv.push_back(x);
       cv_in += x_in;
+      lw_ratio += r[c_p] > 0.0 ? r[c_lwp] / r[c_p] : NAN;
       cv_e1.push_back(r[c_e1]);
       cv_ev.push_back(r[c_ev]);
       cv_phi.push_back(sine_to_deg(x));
@@ -792,6 +814,7 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   const MeanEstimate est = correlated_mean(cv);
   res.phi_cv_deg = sine_to_deg(est.mean);
   res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
+  res.lw_wall_ratio_cv = lw_ratio / static_cast<double>(cv.size());
   res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
   res.cv_effective_samples = est.effective_samples;
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);
@@ -809,7 +832,7 @@ void judge_window(const TriaxialConfig& cfg, TriaxialResult& res) {
   int n = 0;
   res.cv_rows_in_extension = res.cv_rows_unloaded = 0;
   for (const auto& r : s.rows) {
-    if (!cfg.in_cv_window(r[c_e1])) continue;
+    if (!cfg.in_cv_window(r[c_e1], cfg.strain_rate * res.dt)) continue;
     z += r[c_z];
     ++n;
     res.cv_rows_unloaded += r[c_s1] <= 0.0;
@@ -861,16 +884,25 @@ void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.porosity_final = s.rows.back()[s.column("porosity")];
   res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
   res.eps_v_final = s.rows.back()[c_ev];
-  res.max_dilatancy_deg = -90.0;
+  // Rows lie up to half a shear step from their strain (TriaxialConfig::in_cv_window).
+  const double span = cfg.dilatancy_window - cfg.strain_rate * res.dt - 1e-9;
+  res.max_dilatancy_deg = NAN;
   for (std::size_t i = 0; i < s.rows.size(); ++i) {
     for (std::size_t j = i + 1; j < s.rows.size(); ++j) {
       const double de1 = s.rows[j][c_e1] - s.rows[i][c_e1];
-      if (de1 < cfg.dilatancy_window - 1e-9) continue;
+      if (de1 < span) continue;
       const double dev = s.rows[j][c_ev] - s.rows[i][c_ev];
-      res.max_dilatancy_deg = std::max(res.max_dilatancy_deg, sine_to_deg(dilatancy_sine(dev, de1)));
+      const double psi = sine_to_deg(dilatancy_sine(dev, de1));
+      if (std::isnan(res.max_dilatancy_deg) || psi > res.max_dilatancy_deg) res.max_dilatancy_deg = psi;
       break;
     }
   }
+  // A shear shorter than the window has no pair of rows that far apart: the angle
+  // stayed at its starting -90 deg and was stored as measured.
+  if (std::isnan(res.max_dilatancy_deg))
+    res.outcome.warnings.push_back("the shear, to eps1 " + fmt(cfg.axial_strain) +
+                                   ", is shorter than triaxial.dilatancy_window (" + fmt(cfg.dilatancy_window) +
+                                   "): max_dilatancy_deg is not measured");
 }
 
 // A small sample's interior holds a few grains or none (50 grains: about 2), and its
@@ -878,7 +910,7 @@ void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
 void judge_the_interior(const TriaxialConfig& cfg, TriaxialResult& res) {
   if (res.interior_measured()) return;
   for (double* v : {&res.phi_peak_interior_deg, &res.phi_cv_interior_deg, &res.porosity_interior_initial,
-                    &res.porosity_interior_final, &res.lw_wall_mismatch})
+                    &res.porosity_interior_final, &res.lw_wall_mismatch, &res.lw_wall_ratio_cv})
     *v = NAN;
   res.outcome.warnings.push_back("the interior (the box less d_max = " + fmt(cfg.material.d_max) +
                                  " m from each wall) held " + std::to_string(res.interior_grains) +

@@ -108,8 +108,15 @@ struct TriaxialConfig {
   double sample_strain = 0.001;              // series row every this much eps1
   long sample_steps = 0;                     // > 0: a row every this many shear steps instead
   double cv_from = 0.20, cv_to = 0.30;       // critical-state window of eps1
-  // Whether a row at axial strain e1 is in that window (its edges with a round-off margin).
-  bool in_cv_window(double e1) const { return e1 >= cv_from - 1e-9 && e1 <= cv_to + 1e-9; }
+  // Whether a row at axial strain e1 is in that window. A row is taken on the first
+  // shear step within half a step of its strain, so a row meant for an edge lies up to
+  // half a step (`step_strain`, the axial strain of one shear step) on either side of
+  // it: with a margin of 1e-9 the row meant for 0.20 was taken at 0.19999994 and left
+  // out, and a window of [0.049, 0.05] held no row at all.
+  bool in_cv_window(double e1, double step_strain) const {
+    const double margin = 0.5 * step_strain + 1e-9;
+    return e1 >= cv_from - margin && e1 <= cv_to + margin;
+  }
   double quasi_static_inertial = 1e-3;       // warn above this inertial number
   // Beyond these the run is no drained triaxial test and ends invalid: the lateral
   // walls' mean stress error in shear (0.5: sigma3 half off p0 on average), and the
@@ -173,8 +180,14 @@ struct TriaxialResult {
   // force chain against a wall that loads and buckles), not on the stress-strain
   // curve's hump: the run warns.
   static constexpr double kPeakTransientDeg = 2.0;
-  // The rule, for a result here and for stored ones (calibrate): false on NaN.
-  static bool peak_on_a_spike(double peak_deg, double smoothed_deg) {
+  // Series rows after the peak's row (0: the peak is the last row). The centred running
+  // mean reaches no closer to the end than half its width (2 rows): a curve still rising
+  // there peaks above its running mean by the rise, and is no spike.
+  int peak_rows_to_end = -1;
+  // The rule, for a result here and for stored ones (calibrate): false on NaN. Without
+  // rows_to_end (NaN: results stored before it was; -1: no row), judged by the angles alone.
+  static bool peak_on_a_spike(double peak_deg, double smoothed_deg, double rows_to_end = NAN) {
+    if (rows_to_end >= 0 && rows_to_end < kPeakSmoothingRows / 2) return false;
     return peak_deg - smoothed_deg > kPeakTransientDeg;
   }
   // phi_cv: the angle of the mean stress ratio over the window; its standard error
@@ -212,6 +225,10 @@ struct TriaxialResult {
   double max_dilatancy_deg = 0;     // max of asin(-deps_v / (2 deps1 - deps_v))
   double max_inertial_number = 0;
   double lw_wall_mismatch = 0;      // |p_LW - p_walls| / p_walls at the start of shear
+  // The interior's Love-Weber mean stress over the walls', averaged over the
+  // critical-state window: below 1 where the layers along the walls carry more than
+  // their share in shear (0.87 on 2,000 grains, 0.3% off at the start of shear).
+  double lw_wall_ratio_cv = NAN;
   // Grains whose centres lie in the interior (the box less d_max from each wall), the
   // fewer of the start and the end of shear. Below kMinInteriorGrains the interior measures nothing: its
   // metrics above are NaN and a warning says why.

@@ -207,7 +207,10 @@ void add_coordination(const engine::Series& s, bool interior_measured, engine::M
     m.emplace_back("coordination_initial", s.rows.front().at(static_cast<std::size_t>(z_all)));
     m.emplace_back("coordination_final", s.rows.back().at(static_cast<std::size_t>(z_all)));
   }
-  if (z_mech >= 0) m.emplace_back("coordination_mech_final", s.rows.back().at(static_cast<std::size_t>(z_mech)));
+  if (z_mech >= 0) {
+    m.emplace_back("coordination_mech_initial", s.rows.front().at(static_cast<std::size_t>(z_mech)));
+    m.emplace_back("coordination_mech_final", s.rows.back().at(static_cast<std::size_t>(z_mech)));
+  }
   // Over the Love-Weber volume, free of the walls' deficit: the values to compare
   // with the seed's Eq. 2.8.
   // NaN where the interior held too few grains to measure (the run warns).
@@ -219,7 +222,10 @@ void add_coordination(const engine::Series& s, bool interior_measured, engine::M
     m.emplace_back("coordination_interior_initial", interior(0, z_in));
     m.emplace_back("coordination_interior_final", interior(s.rows.size() - 1, z_in));
   }
-  if (z_mech_in >= 0) m.emplace_back("coordination_mech_interior_final", interior(s.rows.size() - 1, z_mech_in));
+  if (z_mech_in >= 0) {
+    m.emplace_back("coordination_mech_interior_initial", interior(0, z_mech_in));
+    m.emplace_back("coordination_mech_interior_final", interior(s.rows.size() - 1, z_mech_in));
+  }
 }
 
 SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
@@ -335,18 +341,21 @@ std::string advice(const nlohmann::json& p) {
   if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)
     next_note(os, 6) << "triaxial.sample_strain (" << c.sample_strain << ") is not used: a row is taken every "
        << "triaxial.sample_steps (" << c.sample_steps << ") steps of shear instead";
+  if (c.axial_strain < c.dilatancy_window)
+    next_note(os, 6) << "triaxial.axial_strain (" << c.axial_strain << ") is shorter than triaxial.dilatancy_window ("
+       << c.dilatancy_window << "): max_dilatancy_deg will not be measured (the run will warn)";
   // A series too coarse for what the run judges from it: the peak needs 5 rows (its
   // running mean takes 5), the critical-state window 3 (one row has a standard error
   // of 0 and no trend). Counted as the shear records them: a row at eps1 = 0, one
-  // every row_strain (a hair short of it, so that a row on the window's lower edge
-  // falls outside), and one at the end.
+  // every row_strain, and one at the end; a row on a window's edge is in it.
   const double row_strain =
       c.sample_steps > 0 && f.dt > 0.0 ? static_cast<double>(c.sample_steps) * c.strain_rate * f.dt : c.sample_strain;
   if (row_strain > 0.0) {
-    const auto rows_to = [&](double e) { return std::floor(e / row_strain + 1e-9); };
+    const auto rows_to = [&](double e) { return std::floor(e / row_strain + 1e-9); };     // rows in (0, e]
+    const auto rows_below = [&](double e) { return std::ceil(e / row_strain - 1e-9); };  // rows in [0, e)
     const bool end_row = c.axial_strain / row_strain - rows_to(c.axial_strain) > 1e-9;
     const double shear_rows = rows_to(c.axial_strain) + 1.0 + (end_row ? 1.0 : 0.0);
-    const double window_rows = rows_to(std::min(c.cv_to, c.axial_strain)) - rows_to(c.cv_from) +
+    const double window_rows = rows_to(std::min(c.cv_to, c.axial_strain)) - rows_below(c.cv_from) + 1.0 +
                                (end_row && c.cv_to >= c.axial_strain ? 1.0 : 0.0);
     const std::string every = "the series takes a row every " + engine::fmt(row_strain) + " of strain (" +
                               (c.sample_steps > 0 ? "triaxial.sample_steps" : "triaxial.sample_strain") + ")";

@@ -283,6 +283,61 @@ TEST(ReposeProfile, AHeapIsStillThoughAGrainHopsAtItsToeButNotWhileItsToeCreeps)
   EXPECT_NE(heap_stillness(t, front, angle, 1.0, 0.4).why.find("no slope could be fitted"), std::string::npos);
 }
 
+TEST(ReposeProfile, AHeapStillByItsProfileIsAtRestFromWhenItStoppedNotFromTheWindow) {
+  // The angle settles at 0.4 s and the front at 0.3 s; the run found the last 0.5 s
+  // (from 0.995 s) still: it has been at rest since 0.4 s.
+  std::vector<double> t, front, angle;
+  for (int i = 0; i <= 300; ++i) {
+    const double ti = 0.005 * i;
+    t.push_back(ti);
+    front.push_back(ti < 0.3 ? 0.02 + 0.03 * ti : 0.029);
+    angle.push_back(ti < 0.4 ? 30.0 - 15.0 * ti : 24.0);
+  }
+  EXPECT_NEAR(still_since(t, front, angle, 0.995, 0.05, 0.5, 0.001), 0.4 - 0.5 / 15.0, 0.006);
+  // A tolerance of 0.1 deg: the angle came within it of 24 at 0.4 - 0.1/15 s.
+  EXPECT_NEAR(still_since(t, front, angle, 0.995, 0.05, 0.1, 0.001), 0.4 - 0.1 / 15.0, 0.006);
+  // Never before min_collapse_time, and never later than the window found still.
+  EXPECT_GE(still_since(t, std::vector<double>(t.size(), 0.03), std::vector<double>(t.size(), 24.0), 0.995, 0.05,
+                        0.5, 0.001),
+            0.05);
+  angle[299] = 25.0;  // a last sample out of tolerance: nothing earlier holds either
+  EXPECT_NEAR(still_since(t, front, angle, 0.995, 0.05, 0.5, 0.001), 0.995, 1e-12);
+}
+
+TEST(ReposeProfile, ALayerAFlatSlopeAndASlopeAgainstTheEndWallAreDoubted) {
+  SlopeFit fit;
+  fit.ok = true;
+  fit.h_max = 0.010;  // 6.7 diameters of 1.5 mm
+  fit.angle_deg = 22.3;
+  fit.angle_err_deg = 1.4;
+  fit.x_lower = 0.030;
+  EXPECT_TRUE(slope_doubts(fit, 0.0015, 0.0015, 0.060, false).empty());
+  EXPECT_TRUE(slope_doubts(fit, 0.0015, 0.0015, 0.060, true).empty());  // at the wall, but its foot is far from it
+  // The foot within two bins of a wall the grains reached: leaning on it.
+  fit.x_lower = 0.0575;
+  auto d = slope_doubts(fit, 0.0015, 0.0015, 0.060, true);
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_NE(d[0].find("leans on the wall"), std::string::npos) << d[0];
+  EXPECT_NE(d[0].find("repose.domain_length"), std::string::npos) << d[0];
+  EXPECT_TRUE(slope_doubts(fit, 0.0015, 0.0015, 0.060, false).empty());  // no grain there: a free toe
+  // 1.4 diameters high: a layer.
+  fit.x_lower = 0.030;
+  fit.h_max = 0.0021;
+  fit.angle_deg = 0.28;
+  fit.angle_err_deg = 0.40;
+  d = slope_doubts(fit, 0.0015, 0.0015, 0.060, false);
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_NE(d[0].find("1.4 mean diameters high"), std::string::npos) << d[0];
+  EXPECT_NE(d[0].find("not a heap"), std::string::npos) << d[0];
+  // A heap, but a slope within two standard errors of flat.
+  fit.h_max = 0.010;
+  d = slope_doubts(fit, 0.0015, 0.0015, 0.060, false);
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_NE(d[0].find("not told apart from flat"), std::string::npos) << d[0];
+  fit.ok = false;
+  EXPECT_TRUE(slope_doubts(fit, 0.0015, 0.0015, 0.060, true).empty());
+}
+
 TEST(ReposeProfile, TooFewPointsIsNoFit) {
   const SlopeFit f = fit_slope({0.0, 0.001}, {0.01, 0.0}, 0.2, 0.8);
   EXPECT_FALSE(f.ok);
@@ -327,6 +382,11 @@ TEST(ReposeConfig, ValidateNamesTheField) {
   c = ok;
   c.rest_profile_window = -0.1;
   EXPECT_EQ(field_of(c), "repose.rest_profile_window");
+  c = ok;
+  c.bin_width = 0.5 * c.material.d_min;  // bins left empty between grains' centres
+  EXPECT_EQ(field_of(c), "repose.bin_width");
+  c.bin_width = c.material.d_min;
+  EXPECT_EQ(field_of(c), "none");
   c = ok;
   c.rest_profile_tol_deg = 0.0;
   EXPECT_EQ(field_of(c), "repose.rest_profile_tol_deg");
@@ -412,7 +472,17 @@ TEST(ReposeScene, AHeapStillButForRattlersIsJudgedByItsProfile) {
     EXPECT_TRUE(r.rest_by_profile);
     EXPECT_LE(r.profile_angle_change_deg, c.rest_profile_tol_deg);
     EXPECT_LE(r.profile_front_change_m, r.bin_width);
-    EXPECT_NEAR(r.time_to_rest_s, c.time_limit - c.rest_profile_window, 2 * c.sample_interval);
+    // At rest from the earliest time the angle and front held still, at the latest
+    // from the window's start; the angle moves no more than the tolerance after it.
+    EXPECT_LE(r.time_to_rest_s, c.time_limit - c.rest_profile_window + 2 * c.sample_interval);
+    EXPECT_GE(r.time_to_rest_s, c.min_collapse_time);
+    double lo = INFINITY, hi = -INFINITY;
+    for (const auto& row : r.energy.rows)
+      if (row[r.energy.column("time")] >= r.time_to_rest_s) {
+        lo = std::min(lo, row[r.energy.column("repose_deg")]);
+        hi = std::max(hi, row[r.energy.column("repose_deg")]);
+      }
+    EXPECT_LE(hi - lo, c.rest_profile_tol_deg);
     ASSERT_EQ(r.outcome.warnings.size(), 1u);
     EXPECT_NE(r.outcome.warnings[0].find("at rest by its profile"), std::string::npos) << r.outcome.warnings[0];
     EXPECT_NE(r.outcome.warnings[0].find("rattlers"), std::string::npos) << r.outcome.warnings[0];

@@ -706,6 +706,8 @@ TEST(TriaxialReposeScenes, QuickTriaxialTaskRunsThroughTheRunner) {
   expect_in(m, "coordination_interior_initial", 1, 12);
   expect_in(m, "coordination_interior_final", 1, 12);
   expect_in(m, "coordination_mech_interior_final", 1, 12);
+  expect_in(m, "coordination_mech_initial", 1, 12);
+  expect_in(m, "coordination_mech_interior_initial", 1, 12);
   // The walls deprive the whole-box count of contacts; the interior is better connected.
   EXPECT_GT(m.at("coordination_interior_initial"), m.at("coordination_initial"));
   expect_in(m, "cv_effective_samples", 0.5, 1000);
@@ -791,6 +793,24 @@ TEST(TriaxialReposeScenes, ACoarseSeriesAndAStepNearTheLimitAreNoted) {
   j["triaxial"]["sample_strain"] = 0.075;
   j["triaxial"]["cv_from"] = 0.1;
   EXPECT_EQ(notes_of(j).find("the series takes a row"), std::string::npos) << notes_of(j);
+  // Rows on both edges of a window are in it: 0.049 and 0.05, two.
+  j["triaxial"]["sample_strain"] = 0.001;
+  j["triaxial"]["axial_strain"] = 0.06;
+  j["triaxial"]["cv_from"] = 0.049;
+  j["triaxial"]["cv_to"] = 0.05;
+  EXPECT_NE(notes_of(j).find("about 2 in the critical-state window (eps1 0.049-0.05)"), std::string::npos)
+      << notes_of(j);
+  // A shear of 0.008: its window 0.00533-0.008 holds the rows at 0.006, 0.007 and
+  // 0.008 (nothing to note), but no two rows lie a dilatancy window (0.01) apart.
+  j["triaxial"].erase("cv_from");
+  j["triaxial"].erase("cv_to");
+  j["triaxial"]["axial_strain"] = 0.008;
+  EXPECT_EQ(notes_of(j).find("critical-state window"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("triaxial.axial_strain (0.008) is shorter than triaxial.dilatancy_window (0.01): "
+                             "max_dilatancy_deg will not be measured"),
+            std::string::npos)
+      << notes_of(j);
+  j["triaxial"].erase("axial_strain");
   j["triaxial"].erase("cv_from");
   j["triaxial"].erase("sample_strain");
   j["triaxial"]["dt_factor"] = 0.45;
@@ -828,12 +848,19 @@ TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
   EXPECT_EQ(notes_of(j).find("theta_deg is 0"), std::string::npos) << notes_of(j);
   j["material"].erase("theta_deg");
   const std::string notes = notes_of(j);
-  EXPECT_NE(notes.find("task #0: material.theta_deg is 0 (its default when the job leaves it out): frictionless grains "
+  EXPECT_NE(notes.find("task #0: material.theta_deg is 0 (the default when a job leaves it out): frictionless grains "
                        "build no heap, they spread and may still be moving at repose.time_limit (not_settled)\n"),
             std::string::npos)  // eta 0: nothing said of it
       << notes;
   EXPECT_NE(notes.find("#1: material.theta_deg is 0"), std::string::npos) << notes;
   EXPECT_NE(notes.find("and material.eta exerts no moment without friction"), std::string::npos) << notes;
+  // With a drag the grains stop, but what they make is the drag's, not a heap.
+  j["repose"]["collapse_drag"] = 15.0;
+  EXPECT_NE(notes_of(j).find("they spread until repose.collapse_drag stops them, and the low deposit's angle is the "
+                             "drag's, not the material's"),
+            std::string::npos)
+      << notes_of(j);
+  EXPECT_EQ(notes_of(j).find("may still be moving"), std::string::npos) << notes_of(j);
 }
 
 // min and max that cut a grading curve to half its mass: the sample is the curve's
