@@ -246,15 +246,33 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
 double still_since(const std::vector<double>& time, const std::vector<double>& front_x,
                    const std::vector<double>& angle_deg, double from, double earliest, double angle_tol_deg,
                    double front_tol_m) {
-  double since = heap_stillness(time, front_x, angle_deg, from, earliest).since;
-  std::size_t k = 0;
-  while (k < time.size() && time[k] < from) ++k;
-  while (k-- > 0 && time[k] >= earliest) {
-    const HeapStillness h = heap_stillness(time, front_x, angle_deg, time[k], earliest);
-    if (!h.judged || h.angle_change_deg > angle_tol_deg || h.front_change_m > front_tol_m) break;
-    since = time[k];
+  std::size_t first = 0;  // the window's first sample: still, by the caller's judgement
+  while (first < time.size() && time[first] < from) ++first;
+  if (first == time.size()) return from;
+  // The angle's range only grows as the start moves back: a running min and max find
+  // the earliest start it allows in one pass.
+  double a_lo = INFINITY, a_hi = -INFINITY;
+  for (std::size_t i = first; i < time.size(); ++i) a_lo = std::min(a_lo, angle_deg[i]), a_hi = std::max(a_hi, angle_deg[i]);
+  std::size_t k = first;
+  while (k > 0 && time[k - 1] >= earliest && std::isfinite(angle_deg[k - 1])) {
+    a_lo = std::min(a_lo, angle_deg[k - 1]), a_hi = std::max(a_hi, angle_deg[k - 1]);
+    if (a_hi - a_lo > angle_tol_deg) break;
+    --k;
   }
-  return since;
+  // Between that start and the window's, the earliest the front allows too, found by
+  // bisection (a series of one sample per step is hundreds of thousands long): `hi`
+  // always passes, so the answer is a start the whole check accepts.
+  const auto still = [&](std::size_t s) {
+    const HeapStillness h = heap_stillness(time, front_x, angle_deg, time[s], earliest);
+    return h.judged && h.angle_change_deg <= angle_tol_deg && h.front_change_m <= front_tol_m;
+  };
+  std::size_t lo = k, hi = first;
+  while (lo < hi) {
+    const std::size_t mid = lo + (hi - lo) / 2;
+    if (still(mid)) hi = mid;
+    else lo = mid + 1;
+  }
+  return time[hi];
 }
 
 std::vector<std::string> slope_doubts(const SlopeFit& fit, double d_mean, double bin, double end_wall_x,

@@ -302,6 +302,23 @@ TEST(ReposeProfile, AHeapStillByItsProfileIsAtRestFromWhenItStoppedNotFromTheWin
             0.05);
   angle[299] = 25.0;  // a last sample out of tolerance: nothing earlier holds either
   EXPECT_NEAR(still_since(t, front, angle, 0.995, 0.05, 0.5, 0.001), 0.995, 1e-12);
+  // A front that crept until 0.6 s, the angle still from 0.4 s: the front decides.
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    front[i] = t[i] < 0.6 ? 0.02 + 0.03 * t[i] : 0.038;
+    angle[i] = t[i] < 0.4 ? 30.0 - 15.0 * t[i] : 24.0;
+  }
+  const double since = still_since(t, front, angle, 0.995, 0.05, 0.5, 0.001);
+  EXPECT_GT(since, 0.5);
+  EXPECT_LT(since, 0.7);
+  // A series of a sample a step (a job's tiny repose.sample_interval): 300,000 samples,
+  // answered by bisection, not by a check per sample (that took minutes).
+  std::vector<double> tl, fl, al;
+  for (int i = 0; i <= 300000; ++i) {
+    tl.push_back(5e-6 * i);
+    fl.push_back(0.029);
+    al.push_back(tl.back() < 0.4 ? 30.0 - 15.0 * tl.back() : 24.0);
+  }
+  EXPECT_NEAR(still_since(tl, fl, al, 1.0, 0.05, 0.5, 0.001), 0.4 - 0.5 / 15.0, 1e-5);
 }
 
 TEST(ReposeProfile, ALayerAFlatSlopeAndASlopeAgainstTheEndWallAreDoubted) {
