@@ -666,44 +666,34 @@ TEST(CriticalState, EachRuleWarnsOnlyWhenItsWindowFails) {
 // the running mean cannot reach, and which was called a spike).
 TEST(PeakStrength, APeakInTheWindowOrAtTheEndIsNoPeak) {
   TriaxialConfig cfg;  // window eps1 0.20-0.30
-  TriaxialResult loose;
-  loose.phi_peak_deg = 33.99;
-  loose.phi_peak_smoothed_deg = 32.9;
-  loose.eps1_at_peak = 0.288;
-  loose.peak_rows_to_end = 12;
-  judge_peak(cfg, loose);
-  ASSERT_EQ(loose.outcome.warnings.size(), 1u);
-  EXPECT_NE(loose.outcome.warnings[0].find("phi_peak 33.99 deg lies at eps1 0.288, inside the critical-state window "
-                                           "(eps1 0.2-0.3)"),
+  auto judged = [&](double peak, double smoothed, double eps1, int rows_to_end) {
+    TriaxialResult r;
+    r.phi_peak_deg = peak;
+    r.phi_peak_smoothed_deg = smoothed;
+    r.eps1_at_peak = eps1;
+    r.peak_rows_to_end = rows_to_end;
+    judge_peak(cfg, r);
+    return r.outcome.warnings;
+  };
+  auto w = judged(33.99, 32.9, 0.288, 12);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NE(w[0].find("phi_peak 33.99 deg lies at eps1 0.288, inside the critical-state window (eps1 0.2-0.3)"),
             std::string::npos)
-      << loose.outcome.warnings[0];
+      << w[0];
 
   cfg.axial_strain = 0.02;
   cfg.cv_from = 0.005;
   cfg.cv_to = 0.01;
-  TriaxialResult rising;
-  rising.phi_peak_deg = 40.0;
-  rising.phi_peak_smoothed_deg = 36.5;  // 3.5 deg below: the mean trails the rise
-  rising.eps1_at_peak = 0.019;
-  rising.peak_rows_to_end = 1;
-  judge_peak(cfg, rising);
-  ASSERT_EQ(rising.outcome.warnings.size(), 1u);
-  EXPECT_NE(rising.outcome.warnings[0].find("phi_mob is largest next to the series' end (phi_peak 40 deg at eps1 "
-                                            "0.019): it was still rising"),
+  w = judged(40.0, 36.5, 0.019, 1);  // 3.5 deg above its running mean, which trails the rise
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NE(w[0].find("phi_mob is largest next to the series' end (phi_peak 40 deg at eps1 0.019): it was still rising"),
             std::string::npos)
-      << rising.outcome.warnings[0];
+      << w[0];
   EXPECT_FALSE(TriaxialResult::peak_on_a_spike(40.0, 36.5, 1.0));
   EXPECT_TRUE(TriaxialResult::peak_on_a_spike(40.0, 36.5, 2.0));
   EXPECT_TRUE(TriaxialResult::peak_on_a_spike(40.0, 36.5));  // stored before the rows were: the angles decide
 
-  // A peak well before both: nothing said.
-  TriaxialResult dense;
-  dense.phi_peak_deg = 40.0;
-  dense.phi_peak_smoothed_deg = 39.5;
-  dense.eps1_at_peak = 0.003;
-  dense.peak_rows_to_end = 17;
-  judge_peak(cfg, dense);
-  EXPECT_TRUE(dense.outcome.warnings.empty());
+  EXPECT_TRUE(judged(40.0, 39.5, 0.003, 17).empty());  // a peak well before both: nothing said
 }
 
 // The figures of a run that met it (500 grains, dt factor 0.15, seed 3: the axial
