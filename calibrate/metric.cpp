@@ -82,9 +82,11 @@ bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics)
 }
 
 std::string spike_rule() {
-  char text[120];
-  std::snprintf(text, sizeof text, "more than %g deg above the peak of its %d-row running mean",
-                engine::TriaxialResult::kPeakTransientDeg, engine::TriaxialResult::kPeakSmoothingRows);
+  char text[160];
+  std::snprintf(text, sizeof text,
+                "more than %g deg above the peak of its %d-row running mean, outside the series' last %d rows",
+                engine::TriaxialResult::kPeakTransientDeg, engine::TriaxialResult::kPeakSmoothingRows,
+                engine::TriaxialResult::kPeakSmoothingRows / 2);
   return text;
 }
 

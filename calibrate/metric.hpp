@@ -30,10 +30,13 @@ bool is_alias(const std::string& name);
 std::optional<double> metric_value(const MetricSpec& spec, const std::vector<std::pair<std::string, double>>& metrics);
 // Whether a triaxial result's phi_peak_deg rests on a spike: more than the scene's
 // TriaxialResult::kPeakTransientDeg above phi_peak_smoothed_deg, the peak of its
-// running mean. Judged from the stored values, so results stored before the scene
-// warned of it count too; false when either is missing (older results, other scenes).
+// running mean, outside the series' last two rows (phi_peak_rows_to_end; results
+// stored before it are judged by the angles alone). Judged from the stored values, so
+// results stored before the scene warned of it count too; false when either angle is
+// missing (older results, other scenes).
 bool peak_on_a_spike(const std::vector<std::pair<std::string, double>>& metrics);
-// "more than 2 deg above the peak of its 5-row running mean", from the same constants.
+// "more than 2 deg above the peak of its 5-row running mean, outside the series' last
+// 2 rows", from the same constants.
 std::string spike_rule();
 // What the running mean's peak owes a spike, as a relative clause that follows
 // "the running mean's peak": one text for the study, map and help.

@@ -244,35 +244,37 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
 }
 
 double still_since(const std::vector<double>& time, const std::vector<double>& front_x,
-                   const std::vector<double>& angle_deg, double from, double earliest, double angle_tol_deg,
+                   const std::vector<double>& angle_deg, double window, double earliest, double angle_tol_deg,
                    double front_tol_m) {
-  std::size_t first = 0;  // the window's first sample: still, by the caller's judgement
-  while (first < time.size() && time[first] < from) ++first;
-  if (first == time.size()) return from;
-  // The angle's range only grows as the start moves back: a running min and max find
-  // the earliest start it allows in one pass.
-  double a_lo = INFINITY, a_hi = -INFINITY;
-  for (std::size_t i = first; i < time.size(); ++i) a_lo = std::min(a_lo, angle_deg[i]), a_hi = std::max(a_hi, angle_deg[i]);
-  std::size_t k = first;
-  while (k > 0 && time[k - 1] >= earliest && std::isfinite(angle_deg[k - 1])) {
-    a_lo = std::min(a_lo, angle_deg[k - 1]), a_hi = std::max(a_hi, angle_deg[k - 1]);
-    if (a_hi - a_lo > angle_tol_deg) break;
-    --k;
+  const std::size_t n = std::min({time.size(), front_x.size(), angle_deg.size()});
+  if (n < 2 || !(window > 0.0)) return NAN;
+  const double end = time[n - 1], block = window / 6.0, from = end - window;
+  // Walked back from the end: the angle's range, the lowest front of each finished
+  // block (f_lo, f_hi: their spread) and of the block being walked (b_min).
+  double a_lo = INFINITY, a_hi = -INFINITY, f_lo = INFINITY, f_hi = -INFINITY, b_min = INFINITY;
+  long k = 0;
+  double since = NAN;
+  for (std::size_t i = n; i-- > 0;) {
+    const double t = time[i];
+    const bool in_window = t >= from;
+    if (t < earliest || !std::isfinite(angle_deg[i])) return in_window ? NAN : since;
+    const long kb = static_cast<long>(std::floor((end - t) / block));
+    if (kb > k) {
+      f_lo = std::min(f_lo, b_min), f_hi = std::max(f_hi, b_min);
+      b_min = INFINITY;
+      k = kb;
+    }
+    a_lo = std::min(a_lo, angle_deg[i]), a_hi = std::max(a_hi, angle_deg[i]);
+    b_min = std::min(b_min, front_x[i]);
+    const bool still = a_hi - a_lo <= angle_tol_deg && std::max(f_hi, b_min) - std::min(f_lo, b_min) <= front_tol_m;
+    if (in_window) {
+      since = still ? t : NAN;  // the window is judged whole, at its first sample
+      continue;
+    }
+    if (!still || std::isnan(since)) break;
+    since = t;
   }
-  // Between that start and the window's, the earliest the front allows too, found by
-  // bisection (a series of one sample per step is hundreds of thousands long): `hi`
-  // always passes, so the answer is a start the whole check accepts.
-  const auto still = [&](std::size_t s) {
-    const HeapStillness h = heap_stillness(time, front_x, angle_deg, time[s], earliest);
-    return h.judged && h.angle_change_deg <= angle_tol_deg && h.front_change_m <= front_tol_m;
-  };
-  std::size_t lo = k, hi = first;
-  while (lo < hi) {
-    const std::size_t mid = lo + (hi - lo) / 2;
-    if (still(mid)) hi = mid;
-    else lo = mid + 1;
-  }
-  return time[hi];
+  return since;
 }
 
 std::vector<std::string> slope_doubts(const SlopeFit& fit, double d_mean, double bin, double end_wall_x,

@@ -103,16 +103,6 @@ MotionCarriers motion_carriers(const std::vector<Vec3>& velocity, const std::vec
 // outward, so the heap's own toe is the envelope. A toe that creeps or retreats moves
 // it, unless it does so only within the window's last sixth; a grain that stays
 // beyond the toe for a whole sixth moves it too (and the heap is not judged at rest).
-// What makes a fitted angle no free slope's, in words for the run's warnings: a
-// deposit under kMinHeapDiameters mean diameters high (a layer, whose line through the
-// bins can read anything near 0: 0.28 +- 0.40 deg was stored with nothing said), a
-// slope not told apart from flat (under two standard errors), or, when grains reached
-// the end wall at `end_wall_x`, a slope whose foot is within two bins of it (the heap
-// leans on the wall: 21.8 deg was warned only that the runout was bounded).
-constexpr double kMinHeapDiameters = 3.0;
-std::vector<std::string> slope_doubts(const SlopeFit& fit, double d_mean, double bin, double end_wall_x,
-                                      bool reached_end_wall);
-
 struct HeapStillness {
   bool judged = false;
   std::string why;
@@ -124,13 +114,27 @@ struct HeapStillness {
 HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<double>& front_x,
                              const std::vector<double>& angle_deg, double from, double earliest);
 
-// For a heap found still over [from, end]: the earliest sample time, not before
-// `earliest`, from which it stayed within both tolerances to the end (the window
-// stretched back; the front's measure by bisection, so it costs O(n log n)). A heap
-// at rest by its profile came to rest then, not at the window's start (a heap still
-// from 0.255 s read 1.005 s).
+// For a heap found still over its last `window` seconds: the earliest sample time,
+// not before `earliest`, from which every start would have been judged still, or NaN
+// when the last window itself is not. Still from a start: the angle's range from it
+// to the end within `angle_tol_deg`, and the front's lowest values in blocks of
+// window/6 counted back from the end (the window's sixths; the block the start cuts
+// counts from the start on) spread by no more than `front_tol_m`. One pass back from
+// the end, stopping at the first start that is not still. A heap at rest by its
+// profile came to rest then, not at the window's start (a heap still from 0.255 s
+// read 1.005 s).
 double still_since(const std::vector<double>& time, const std::vector<double>& front_x,
-                   const std::vector<double>& angle_deg, double from, double earliest, double angle_tol_deg,
+                   const std::vector<double>& angle_deg, double window, double earliest, double angle_tol_deg,
                    double front_tol_m);
+
+// What makes a fitted angle no free slope's, in words for the run's warnings: a
+// deposit under kMinHeapDiameters mean diameters high (a layer, whose line through the
+// bins can read anything near 0: 0.28 +- 0.40 deg was stored with nothing said), a
+// slope not told apart from flat (under two standard errors), or, when grains reached
+// the end wall at `end_wall_x`, a slope whose foot is within two bins of it (the heap
+// leans on the wall: 21.8 deg was warned only that the runout was bounded).
+constexpr double kMinHeapDiameters = 3.0;
+std::vector<std::string> slope_doubts(const SlopeFit& fit, double d_mean, double bin, double end_wall_x,
+                                      bool reached_end_wall);
 
 }  // namespace demcal::engine

@@ -670,9 +670,11 @@ std::string judge_by_profile(const ReposeConfig& cfg, double time_now, double bi
     res.profile_angle_change_deg = still.angle_change_deg;
     res.profile_front_change_m = still.front_change_m;
     res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
-    if (res.rest_by_profile)
-      still.since = still_since(col("time"), col("front_x"), col("repose_deg"), still.since, cfg.min_collapse_time,
-                                cfg.rest_profile_tol_deg, bin);
+    if (res.rest_by_profile) {
+      const double since = still_since(col("time"), col("front_x"), col("repose_deg"), cfg.rest_profile_window,
+                                       cfg.min_collapse_time, cfg.rest_profile_tol_deg, bin);
+      if (since < still.since) still.since = since;  // NaN (the blocks judged otherwise): the window's start
+    }
     note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by " << still.angle_change_deg
          << " deg (tolerance " << cfg.rest_profile_tol_deg << ") and its front by " << still.front_change_m
          << " m (the spread of its lowest value in each sixth of the window; tolerance one bin, " << bin << " m)";
@@ -711,8 +713,9 @@ void measure_deposit(const ReposeConfig& cfg, const ReposeSizes& z, const HeapRe
     res.outcome.status = SceneStatus::invalid;
     res.outcome.failed_stage = "measure";
     res.outcome.message = "no angle of repose: " + fit.why +
-                          (res.reached_end_wall ? " (the grains reached the end wall: a longer repose.domain_length)"
-                                                : " (a larger column, or a narrower repose.bin_width)");
+                          (res.reached_end_wall                 ? " (the grains reached the end wall: a longer repose.domain_length)"
+                           : z.bin > cfg.material.d_min * (1.0 + 1e-9) ? " (a larger column, or a narrower repose.bin_width)"
+                                                                     : " (a larger column)");
     return;
   }
   res.repose_deg = fit.angle_deg;

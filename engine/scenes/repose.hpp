@@ -165,7 +165,9 @@ struct ReposeResult {
   long grains_beyond_front = 0;  // mobile grains past the deposit's front (left out of the fit)
   double front_m = 0;         // L_inf: front position from the back wall
   double final_height_m = 0;  // deposit height above the floor level
-  double time_to_rest_s = 0;  // after the gate opened (by profile: from when the angle and front held still)
+  // After the gate opened: by kinetic energy the first of the quiet samples, by profile
+  // the earliest time from which the angle and front held still (still_since; sooner).
+  double time_to_rest_s = 0;
   bool rest_by_profile = false;  // kinetic energy never passed; the heap's angle and front held still
   double profile_angle_change_deg = 0, profile_front_change_m = 0;  // over the window, when judged
   bool reached_end_wall = false;

@@ -496,16 +496,20 @@ void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
     res.outcome.warnings.push_back("phi_peak " + fmt(res.phi_peak_deg) + " deg lies at eps1 " +
                                    fmt(res.eps1_at_peak, 3) + ", inside the critical-state window (eps1 " +
                                    fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to) +
-                                   "): the sample shows no peak before its critical state (as a loose sample does), "
-                                   "and phi_peak is the highest of the window's scatter, not a peak");
+                                   "): either the sample shows no peak before its critical state (as a loose sample "
+                                   "does), and phi_peak is the highest of the window's scatter, or the window starts "
+                                   "before the peak (a later triaxial.cv_from)");
   else if (at_end)
+    // The centred running mean cannot reach the last rows, so it cannot tell a curve
+    // still rising from a spike there (one row of 20 at the end was called a spike).
     res.outcome.warnings.push_back("phi_mob is largest " +
                                    std::string(res.peak_rows_to_end == 0 ? "in the series' last row"
                                                                          : "next to the series' end") +
                                    " (phi_peak " + fmt(res.phi_peak_deg) + " deg at eps1 " +
-                                   fmt(res.eps1_at_peak, 3) +
-                                   "): it was still rising, and the peak lies beyond the shear (a larger "
-                                   "triaxial.axial_strain)");
+                                   fmt(res.eps1_at_peak, 3) + "), which the " +
+                                   std::to_string(TriaxialResult::kPeakSmoothingRows) +
+                                   "-row running mean does not reach: the curve was still rising there, or a spike of "
+                                   "the walls' stress ended the series (a larger triaxial.axial_strain tells them apart)");
   // A NaN smoothed peak (too few rows) tells nothing.
   if (!TriaxialResult::peak_on_a_spike(res.phi_peak_deg, res.phi_peak_smoothed_deg, res.peak_rows_to_end)) return;
   const std::string span = cfg.sample_steps > 0 ? std::to_string(TriaxialResult::kPeakSmoothingRows) + " rows"
@@ -771,6 +775,7 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   const std::size_t c_xx = s.column("lw_xx"), c_yy = s.column("lw_yy"), c_zz = s.column("lw_zz"),
                     c_lwp = s.column("lw_p"), c_p = s.column("p");
   double best = -1.0, best_in = -1.0, cv_in = 0.0, lw_ratio = 0.0;
+  int lw_rows = 0;
   std::vector<double> sines, cv, cv_e1, cv_ev, cv_phi;
   for (const auto& r : s.rows) {
     const double x = mobilised_sine(r[c_s1], r[c_s2], r[c_s3]);
@@ -786,7 +791,10 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
     if (cfg.in_cv_window(r[c_e1], cfg.strain_rate * res.dt)) {
       cv.push_back(x);
       cv_in += x_in;
-      lw_ratio += r[c_p] > 0.0 ? r[c_lwp] / r[c_p] : NAN;
+      if (r[c_p] > 0.0) {  // a row the walls carried nothing in has no ratio (such rows are warned)
+        lw_ratio += r[c_lwp] / r[c_p];
+        ++lw_rows;
+      }
       cv_e1.push_back(r[c_e1]);
       cv_ev.push_back(r[c_ev]);
       cv_phi.push_back(sine_to_deg(x));
@@ -814,7 +822,7 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   const MeanEstimate est = correlated_mean(cv);
   res.phi_cv_deg = sine_to_deg(est.mean);
   res.phi_cv_interior_deg = sine_to_deg(cv_in / static_cast<double>(cv.size()));
-  res.lw_wall_ratio_cv = lw_ratio / static_cast<double>(cv.size());
+  res.lw_wall_ratio_cv = lw_rows > 0 ? lw_ratio / lw_rows : NAN;
   res.phi_cv_se_deg = rad_to_deg(est.se / std::sqrt(std::max(1e-12, 1.0 - est.mean * est.mean)));
   res.cv_effective_samples = est.effective_samples;
   judge_critical_state(cfg, cv_e1, cv_ev, cv_phi, res);

@@ -181,8 +181,9 @@ struct TriaxialResult {
   // curve's hump: the run warns.
   static constexpr double kPeakTransientDeg = 2.0;
   // Series rows after the peak's row (0: the peak is the last row). The centred running
-  // mean reaches no closer to the end than half its width (2 rows): a curve still rising
-  // there peaks above its running mean by the rise, and is no spike.
+  // mean reaches no closer to the end than half its width (2 rows): there it cannot
+  // tell a curve still rising (which peaks above its running mean by the rise) from a
+  // spike, and the peak is not called one (the run says which it may be).
   int peak_rows_to_end = -1;
   // The rule, for a result here and for stored ones (calibrate): false on NaN. Without
   // rows_to_end (NaN: results stored before it was; -1: no row), judged by the angles alone.
@@ -227,7 +228,7 @@ struct TriaxialResult {
   double lw_wall_mismatch = 0;      // |p_LW - p_walls| / p_walls at the start of shear
   // The interior's Love-Weber mean stress over the walls', averaged over the
   // critical-state window: below 1 where the layers along the walls carry more than
-  // their share in shear (0.87 on 2,000 grains, 0.3% off at the start of shear).
+  // their share in shear (0.92 on 2,000 grains, 0.3% off at the start of shear).
   double lw_wall_ratio_cv = NAN;
   // Grains whose centres lie in the interior (the box less d_max from each wall), the
   // fewer of the start and the end of shear. Below kMinInteriorGrains the interior measures nothing: its

@@ -303,7 +303,7 @@ TEST(TriaxialScene, AnInteriorWithTooFewGrainsIsNotMeasured) {
       EXPECT_LT(r.interior_grains, TriaxialResult::kMinInteriorGrains);
       EXPECT_TRUE(warned) << r.outcome.message;
       for (double v : {r.porosity_interior_initial, r.porosity_interior_final, r.phi_peak_interior_deg,
-                       r.phi_cv_interior_deg, r.lw_wall_mismatch})
+                       r.phi_cv_interior_deg, r.lw_wall_mismatch, r.lw_wall_ratio_cv})
         EXPECT_TRUE(std::isnan(v)) << v;
     } else {
       EXPECT_GE(r.interior_grains, TriaxialResult::kMinInteriorGrains);
@@ -485,8 +485,9 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   const TriaxialResult& r = cached("dense");
   ASSERT_TRUE(r.outcome.ok()) << r.outcome.message;
   const double deg = 180.0 / M_PI;
-  double best = -2.0, eps_at_best = NAN, q_at_best = NAN, sum = 0.0, sum_in = 0.0;
+  double best = -2.0, eps_at_best = NAN, q_at_best = NAN, sum = 0.0, sum_in = 0.0, lw_ratio = 0.0;
   int n = 0;
+  std::size_t best_row = 0;
   // A row is taken within half a shear step of its strain: one meant for an edge of
   // the window counts, whichever side of it the step left it.
   const double m = 0.5 * small(Packing::dense).strain_rate * r.dt + 1e-9;
@@ -497,10 +498,12 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
       best = x;
       eps_at_best = col(r, i, "eps1");
       q_at_best = col(r, i, "q");
+      best_row = i;
     }
     const double e1 = col(r, i, "eps1");
     if (e1 >= 0.10 - m && e1 <= 0.15 + m) {
       sum += x;
+      lw_ratio += col(r, i, "lw_p") / col(r, i, "p");
       const double a = col(r, i, "lw_zz"), b = 0.5 * (col(r, i, "lw_xx") + col(r, i, "lw_yy"));
       sum_in += (a - b) / (a + b);
       ++n;
@@ -525,6 +528,8 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   for (const auto& w : r.outcome.warnings) spike_warned |= w.find("rests on a spike") != std::string::npos;
   EXPECT_EQ(spike_warned, r.phi_peak_deg - r.phi_peak_smoothed_deg > TriaxialResult::kPeakTransientDeg);
   EXPECT_EQ(r.eps1_at_peak, eps_at_best);
+  EXPECT_EQ(r.peak_rows_to_end, static_cast<int>(r.series.rows.size() - 1 - best_row));
+  EXPECT_NEAR(r.lw_wall_ratio_cv, lw_ratio / n, 1e-12);
   EXPECT_EQ(r.q_peak, q_at_best);
   EXPECT_NEAR(r.phi_cv_deg, std::asin(sum / n) * deg, 1e-10);
   EXPECT_NEAR(r.phi_cv_interior_deg, std::asin(sum_in / n) * deg, 1e-10);
@@ -677,16 +682,27 @@ TEST(PeakStrength, APeakInTheWindowOrAtTheEndIsNoPeak) {
   };
   auto w = judged(33.99, 32.9, 0.288, 12);
   ASSERT_EQ(w.size(), 1u);
-  EXPECT_NE(w[0].find("phi_peak 33.99 deg lies at eps1 0.288, inside the critical-state window (eps1 0.2-0.3)"),
+  EXPECT_NE(w[0].find("phi_peak 33.99 deg lies at eps1 0.288, inside the critical-state window (eps1 0.2-0.3): "
+                      "either the sample shows no peak"),
             std::string::npos)
       << w[0];
+  // In the window and on a spike: both said.
+  w = judged(36.5, 33.0, 0.25, 50);
+  ASSERT_EQ(w.size(), 2u);
+  EXPECT_NE(w[1].find("rests on a spike"), std::string::npos) << w[1];
+  // In the window and in the last row: the window's warning only (the running mean
+  // cannot judge a spike there).
+  w = judged(36.5, 33.0, 0.3, 0);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NE(w[0].find("inside the critical-state window"), std::string::npos) << w[0];
 
   cfg.axial_strain = 0.02;
   cfg.cv_from = 0.005;
   cfg.cv_to = 0.01;
   w = judged(40.0, 36.5, 0.019, 1);  // 3.5 deg above its running mean, which trails the rise
   ASSERT_EQ(w.size(), 1u);
-  EXPECT_NE(w[0].find("phi_mob is largest next to the series' end (phi_peak 40 deg at eps1 0.019): it was still rising"),
+  EXPECT_NE(w[0].find("phi_mob is largest next to the series' end (phi_peak 40 deg at eps1 0.019), which the 5-row "
+                      "running mean does not reach: the curve was still rising there, or a spike"),
             std::string::npos)
       << w[0];
   EXPECT_FALSE(TriaxialResult::peak_on_a_spike(40.0, 36.5, 1.0));

@@ -708,6 +708,8 @@ TEST(TriaxialReposeScenes, QuickTriaxialTaskRunsThroughTheRunner) {
   expect_in(m, "coordination_mech_interior_final", 1, 12);
   expect_in(m, "coordination_mech_initial", 1, 12);
   expect_in(m, "coordination_mech_interior_initial", 1, 12);
+  expect_in(m, "lw_wall_ratio_cv", 0.3, 2.0);
+  expect_in(m, "phi_peak_rows_to_end", 0, 1000);
   // The walls deprive the whole-box count of contacts; the interior is better connected.
   EXPECT_GT(m.at("coordination_interior_initial"), m.at("coordination_initial"));
   expect_in(m, "cv_effective_samples", 0.5, 1000);
