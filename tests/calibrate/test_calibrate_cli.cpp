@@ -103,10 +103,12 @@ TEST(CalibrateStore, APointShortOfReplicasAndANodeWithoutTasksAreSaid) {
     EXPECT_EQ(rs.holes(), 2);
     EXPECT_EQ(rs.partials(), 1);
     EXPECT_EQ(rs.partial_list(), "theta 40, eta 0: 1 of 2 (1 failed)");
-    for (const auto& p : rs.points)
-      if (p.hole())
+    for (const auto& p : rs.points) {
+      if (p.hole()) {
         EXPECT_EQ(p.without_value(), p.theta == 15 ? "2 invalid (no test)" : "no task here: not in this database, or not selected")
             << p.theta;
+      }
+    }
   }
   Result r = run_demcal(fit_at(28, 0.22), d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
