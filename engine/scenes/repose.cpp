@@ -161,6 +161,10 @@ FloorGrid floor_grid(const ReposeConfig& c) {
 }
 }  // namespace
 
+double ReposeConfig::column_bins() const {
+  return column_width / (bin_width > 0.0 ? bin_width : material.grading().mean());
+}
+
 double ReposeConfig::weight_overlap() const {
   const double d = material.grading().mean();
   const double force = target_solid_fraction * material.density * gravity * column_height * d * d;

@@ -201,6 +201,13 @@ std::string advice(const nlohmann::json& p) {
           "repose.time_limit above "
        << c.profile_check_time() << " s, or set repose.rest_profile_window to 0 to do without the check";
   if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 6) << cut;
+  // The run warns of a slope over fewer than 6 bins, or gives no angle: say so first.
+  if (c.column_bins() < engine::ReposeResult::kMinSlopeBins)
+    next_note(os, 3) << "repose.column_width " << c.column_width << " m is " << c.column_bins()
+       << " profile bins wide (repose.bin_width, by default the mean diameter): its heap's slope will span about as "
+          "few, under the "
+       << engine::ReposeResult::kMinSlopeBins
+       << " the angle needs, and the run will warn that it is no measurement or find no slope (a wider column)";
   if (c.weight_overlap() > engine::ReposeConfig::kWeightOverlapNote)
     next_note(os, 3) << "at repose.stiffness_scale " << c.stiffness_scale << " the column's weight alone presses a grain at "
        << "its foot about " << c.weight_overlap() << " of the smallest radius into its neighbours, and the collapse's "

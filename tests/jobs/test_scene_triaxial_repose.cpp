@@ -835,6 +835,14 @@ TEST(TriaxialReposeScenes, ACoarseSeriesAndAStepNearTheLimitAreNoted) {
 TEST(TriaxialReposeScenes, AReposeStiffnessScaleTooLowAndAStepAtTheLimitAreNoted) {
   json j = repose_base();
   EXPECT_EQ(notes_of(j).find("stiffness_scale"), std::string::npos) << notes_of(j);
+  EXPECT_EQ(notes_of(j).find("profile bins wide"), std::string::npos) << notes_of(j);
+  // A column 4 bins wide heaps no slope to measure (the scene test's 6 mm column).
+  j["repose"]["column_width"] = 0.006;
+  EXPECT_NE(notes_of(j).find("repose.column_width 0.006 m is 4 profile bins wide (repose.bin_width, by default the "
+                             "mean diameter): its heap's slope will span about as few, under the 6"),
+            std::string::npos)
+      << notes_of(j);
+  j["repose"].erase("column_width");
   j["repose"]["stiffness_scale"] = 1e-6;
   EXPECT_NE(notes_of(j).find("the column's weight alone presses a grain at its foot"), std::string::npos)
       << notes_of(j);
