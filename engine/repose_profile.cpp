@@ -258,7 +258,9 @@ double still_since(const std::vector<double>& time, const std::vector<double>& f
     const double t = time[i];
     const bool in_window = t >= from;
     if (t < earliest || !std::isfinite(angle_deg[i])) return in_window ? NAN : since;
-    const long kb = static_cast<long>(std::floor((end - t) / block));
+    // A sample on a block's edge joins the later block: the window's first sample is
+    // in its earliest sixth, not a block of its own.
+    const long kb = std::max(0L, static_cast<long>(std::floor((end - t) / block - 1e-9)));
     if (kb > k) {
       f_lo = std::min(f_lo, b_min), f_hi = std::max(f_hi, b_min);
       b_min = INFINITY;
