@@ -121,7 +121,7 @@ HeapStillness heap_stillness(const std::vector<double>& time, const std::vector<
 // window/6 counted back from the end (the window's sixths; the block the start cuts
 // counts from the start on) spread by no more than `front_tol_m`. One pass back from
 // the end, stopping at the first start that is not still. A heap at rest by its
-// profile came to rest then, not at the window's start (a heap still from 0.255 s
+// profile came to rest then, not at the window's start (a heap still from 0.340 s
 // read 1.005 s).
 double still_since(const std::vector<double>& time, const std::vector<double>& front_x,
                    const std::vector<double>& angle_deg, double window, double earliest, double angle_tol_deg,
