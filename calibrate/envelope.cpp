@@ -1,5 +1,6 @@
 #include "envelope.hpp"
 #include "excerpt.hpp"
+#include "metric.hpp"
 
 #include "response_surface.hpp"
 #include "jobs/job_error.hpp"
@@ -16,14 +17,35 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 double phi_of(double N) { return (2 * std::atan(std::sqrt(N)) - kPi / 2) * 180 / kPi; }
+double N_of(double phi_deg) {
+  const double s = std::sin(phi_deg * kPi / 180);
+  return (1 + s) / (1 - s);
+}
 double dphi_dN(double N) { return 1.0 / ((1 + N) * std::sqrt(N)) * 180 / kPi; }  // degrees per unit N
 
 }  // namespace
+
+const char* state_metric(EnvelopeState state) {
+  switch (state) {
+    case EnvelopeState::smoothed: return "phi_peak_smoothed_deg";
+    case EnvelopeState::cv: return "phi_cv_deg";
+    default: return "phi_peak_deg";
+  }
+}
+
+double t95(int dof) {
+  static const double table[] = {NAN,   12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+                                 2.201, 2.179,  2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086};
+  if (dof < 1) return NAN;
+  if (dof <= 20) return table[dof];
+  return dof <= 30 ? 2.042 : 1.96;
+}
 
 Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& s1) {
   if (s3.size() != s1.size()) throw std::invalid_argument("sigma3 and sigma1 differ in length");
   Envelope e;
   e.n = static_cast<int>(s3.size());
+  e.dof = e.n - 2;
   e.pressures = static_cast<int>(std::set<double>(s3.begin(), s3.end()).size());
   if (e.pressures < 2) throw std::invalid_argument("an envelope needs at least two confining pressures");
   const double n = e.n;
@@ -38,7 +60,8 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
   for (int i = 0; i < e.n; ++i) rss += std::pow(s1[i] - (N * s3[i] + b), 2);
   const double s2 = e.n > 2 ? rss / (n - 2) : NAN;
   const double varN = s2 / sxx, varb = s2 * (1 / n + mx * mx / sxx), covNb = -mx * s2 / sxx;
-  if (!(N > 0)) throw std::invalid_argument("the fitted slope sigma1/sigma3 is not positive: no friction angle");
+  // N = 1 is phi = 0; below it sigma1 would fall behind sigma3 as the pressure rises.
+  if (!(N > 1)) throw std::invalid_argument("the fitted slope sigma1/sigma3 is not above 1: no positive friction angle");
   e.phi_deg = phi_of(N);
   e.phi_se = dphi_dN(N) * std::sqrt(varN);
   const double rN = std::sqrt(N);
@@ -56,7 +79,9 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
   return e;
 }
 
-std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where) {
+std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& job, const std::vector<jobs::Where>& where,
+                                         EnvelopeState state) {
+  const std::string metric = state_metric(state);
   if (!store.find_job(job)) throw jobs::JobError("--job", "no job named \"" + job + "\"");
   const auto rows = jobs::select_rows(store, job, where);
   if (rows.empty()) throw jobs::JobError("--where", "no task of job \"" + job + "\" matches the filters");
@@ -93,19 +118,24 @@ std::vector<PointEnvelope> job_envelopes(db::Store& store, const std::string& jo
       pe.left_out.push_back(why.str());
       continue;
     }
-    double q = NAN;
+    double phi = NAN;
     for (const auto& m : r.metrics)
-      if (m.first == "q_peak_pa") q = m.second;
-    if (!std::isfinite(q)) {
-      pe.left_out.push_back(why.str() + "has no q_peak_pa");
+      if (m.first == metric) phi = m.second;
+    // The servo holds sigma3 at the confining pressure (to ~1%); the angle is the walls'
+    // measured stress ratio. sigma3 + q at the nominal pressure mixed the two (0.4 deg
+    // off the task's own phi_peak where sigma3 had sagged by 2% at the peak).
+    if (!std::isfinite(phi) || !(phi > -90.0 && phi < 90.0)) {
+      pe.left_out.push_back(why.str() + "has no " + metric);
       continue;
     }
     if (!msg.warning.empty() && pe.warned++ == 0) pe.first_warning = msg.warning;
+    if (state == EnvelopeState::peak && peak_on_a_spike(r.metrics)) ++pe.spiked;
+    if (state == EnvelopeState::cv && says_not_at_critical_state(msg.warning)) ++pe.not_critical;
     pe.sigma3_kpa.push_back(s3);
-    pe.sigma1_kpa.push_back(s3 + q / 1000.0);
+    pe.sigma1_kpa.push_back(s3 * N_of(phi));
     ++usable;
   }
-  if (usable == 0) throw jobs::JobError("--job", "no data: no finished task of job \"" + job + "\" has q_peak_pa");
+  if (usable == 0) throw jobs::JobError("--job", "no data: no finished task of job \"" + job + "\" has " + metric);
   std::vector<PointEnvelope> out;
   for (auto& [k, pe] : by) {
     try {

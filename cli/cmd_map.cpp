@@ -102,42 +102,68 @@ void add_map(CLI::App& app, int& exit_code) {
   });
 }
 
-// What the table's numbers stand on: the peaks left out and why, the results used
-// that carry warnings (a fast shear's peaks, spikes), and a cohesion spheres cannot
-// have, which such peaks make.
-void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, const std::string& hint) {
-  int warned = 0, used = 0;
+// What the table's numbers stand on: the tests left out and why, the results used
+// that carry warnings (a fast shear's peaks, spikes, windows not at critical state),
+// errors resting on one or two degrees of freedom, and a cohesion spheres cannot have,
+// which such results make.
+void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, calibrate::EnvelopeState state,
+                            const std::string& hint) {
+  int warned = 0, used = 0, spiked = 0, not_critical = 0;
   std::string first;
   for (const auto& e : envs) {
     for (const auto& why : e.left_out)
       std::cout << "left out at theta " << e.theta << ", eta " << e.eta << ": " << why << "\n";
+    if (!e.note.empty()) continue;  // no envelope: its results were not used
     used += static_cast<int>(e.sigma3_kpa.size());
     if (e.warned > 0 && warned == 0) first = e.first_warning;
     warned += e.warned;
+    spiked += e.spiked;
+    not_critical += e.not_critical;
   }
+  const char* what = state == calibrate::EnvelopeState::cv ? "critical states" : "peaks";
   if (warned > 0)
-    std::cout << "warning: " << warned << " of the " << used << " peaks used carry warnings (" << hint
+    std::cout << "warning: " << warned << " of the " << used << " " << what << " used carry warnings (" << hint
               << "), e.g.: " << calibrate::first_warning(first) << "\n";
+  if (spiked > 0)
+    std::cout << "warning: " << spiked << " of the " << used << " peaks used rest on a spike of the walls' stress (phi_peak "
+              << calibrate::spike_rule() << "): --state smoothed draws the envelope through the running mean's peaks\n";
+  if (not_critical > 0)
+    std::cout << "warning: " << not_critical << " of the " << used
+              << " critical states used come from a window the run judged not at critical state (still changing volume "
+                 "or phi_mob drifting)\n";
   const auto mean = [](const std::vector<double>& v) {
     double s = 0;
     for (double x : v) s += x;
     return v.empty() ? 0.0 : s / static_cast<double>(v.size());
   };
-  // Beyond two standard errors and a fiftieth of the mean pressure (on exact data both
-  // c and its error are round-off); with two pressures, beyond a tenth of their mean.
-  // Either sign: a negative intercept is a tension the grains cannot carry.
   for (const auto& e : envs) {
-    const double bound = std::isfinite(e.env.c_se) ? std::max(2.0 * e.env.c_se, 0.02 * mean(e.sigma3_kpa))
-                                                   : 0.1 * mean(e.sigma3_kpa);
-    if (!e.note.empty() || !(std::abs(e.env.c) > bound)) continue;
+    if (!e.note.empty()) continue;
+    // A standard error from one or two residuals: its 95% interval is Student's, not 2 se.
+    // (On exact data the errors are round-off: nothing to widen.)
+    if (e.env.dof >= 1 && e.env.dof <= 2 && e.env.phi_se > 1e-6)
+      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": the errors with cohesion rest on "
+                << e.env.dof << " degree(s) of freedom (" << e.env.n << " tests, 2 parameters): a 95% interval is "
+                << calibrate::t95(e.env.dof) << " standard errors either side, not 2 (replicas narrow it)\n";
+    else if (e.env.n - 1 <= 2 && e.env.phi0_se > 1e-6)
+      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": the zero-cohesion angle's error rests on "
+                << e.env.n - 1 << " degree(s) of freedom (" << e.env.n << " tests, 1 parameter): a 95% interval is "
+                << calibrate::t95(e.env.n - 1) << " standard errors either side, not 2 (replicas narrow it)\n";
+    // Beyond the 95% interval and a fiftieth of the mean pressure (on exact data both c
+    // and its error are round-off); with two tests, beyond a tenth of their mean. Either
+    // sign: a negative intercept is a tension the grains cannot carry.
+    const double bound = std::isfinite(e.env.c_se)
+                             ? std::max(calibrate::t95(e.env.dof) * e.env.c_se, 0.02 * mean(e.sigma3_kpa))
+                             : 0.1 * mean(e.sigma3_kpa);
+    if (!(std::abs(e.env.c) > bound)) continue;
     std::ostringstream c;
     c << std::setprecision(3) << e.env.c;
     if (std::isfinite(e.env.c_se)) c << " +- " << e.env.c_se;
     std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": cohesion " << c.str()
-              << " kPa from grains without cohesion: the straight line through the peaks has it from the envelope's "
+              << " kPa from grains without cohesion: the straight line through the " << what
+              << " has it from the envelope's "
               << (e.env.c > 0 ? "curvature (a dense sample's peak angle falls with pressure)"
-                              : "slope (the peak angle rises with pressure here; a negative c is a tension)")
-              << " or from peaks of a shear too fast or a sample too small (the warnings above); phi at c = 0 is the "
+                              : "slope (the angle rises with pressure here; a negative c is a tension)")
+              << " or from results of a shear too fast or a sample too small (the warnings above); phi at c = 0 is the "
                  "other reading\n";
   }
 }
@@ -147,9 +173,15 @@ void add_envelope(CLI::App& app, int& exit_code) {
   struct Args {
     std::string db = "demcal.db", job;
     std::vector<std::string> where;
+    std::string state = "peak";
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--job", a->job, "triaxial job spanning several confining_kpa (default: the only job)")->check(kNonEmpty);
+  cmd->add_option("--state", a->state,
+                  "the angle each test gives: peak (phi_peak_deg), smoothed (phi_peak_smoothed_deg, the running "
+                  "mean's peak, which a spike barely moves) or cv (phi_cv_deg, the critical state)")
+      ->check(CLI::IsMember({"peak", "smoothed", "cv"}))
+      ->capture_default_str();
   cmd->add_option("--where", a->where, "KEY=VALUE pinning another parameter; repeatable");
   cmd->add_option("--db", a->db, "SQLite database")->check(kDbPath)->capture_default_str();
   cmd->callback([a, &exit_code] {
@@ -165,7 +197,10 @@ void add_envelope(CLI::App& app, int& exit_code) {
           throw jobs::JobError("--job", all.empty() ? "no data: the database holds no jobs" : "the database holds several jobs; name one");
         job = all.front();
       }
-      const auto envs = calibrate::job_envelopes(store, job, where);
+      const calibrate::EnvelopeState state = a->state == "cv"         ? calibrate::EnvelopeState::cv
+                                             : a->state == "smoothed" ? calibrate::EnvelopeState::smoothed
+                                                                      : calibrate::EnvelopeState::peak;
+      const auto envs = calibrate::job_envelopes(store, job, where, state);
       if (std::all_of(envs.begin(), envs.end(), [](const auto& e) { return !e.note.empty(); }))
         throw jobs::JobError("--job", "job \"" + job + "\" has no (theta, eta) with finished tasks at two or more "
                                       "confining pressures (" + envs.front().note + ")");
@@ -190,11 +225,13 @@ void add_envelope(CLI::App& app, int& exit_code) {
                     e.env.phi_deg, se(e.env.phi_se).c_str(), e.env.c, se(e.env.c_se).c_str(), e.env.phi0_deg,
                     se(e.env.phi0_se).c_str());
       }
-      std::cout << "n: peaks fitted, p: distinct confining pressures; sigma1 = N sigma3 + 2 c sqrt(N), "
-                   "N = tan^2(45 + phi/2), least squares on the peaks (sigma1 = sigma3 + q_peak); +- one standard error\n";
+      std::cout << "n: tests fitted, p: distinct confining pressures; sigma1 = N sigma3 + 2 c sqrt(N), "
+                   "N = tan^2(45 + phi/2), least squares over the tests, each at sigma3 = its confining pressure and "
+                   "sigma1 = sigma3 (1 + sin phi) / (1 - sin phi) from its "
+                << calibrate::state_metric(state) << "; +- one standard error (n - 2 degrees of freedom; c = 0: n - 1)\n";
       if (unknown_se)
-        std::cout << "n/a: the line through two peaks fits them exactly and has no standard error; it takes three\n";
-      print_envelope_caveats(envs, jobs::query_hint(a->db, job));
+        std::cout << "n/a: the line through two tests fits them exactly and has no standard error; it takes three\n";
+      print_envelope_caveats(envs, state, jobs::query_hint(a->db, job));
       return kOk;
     });
   });

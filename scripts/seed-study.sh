@@ -72,6 +72,8 @@ printf '%s\n' "${txt//"$DB"/$(basename "$DB")}" > "$OUT/fit.txt"
 "$DEMCAL" map --metric phi_peak --job seed-dense-grid --db "$DB" --out "$OUT/map_phi_peak_fit.png" > /dev/null 2>&1 || true
 "$DEMCAL" envelope --job seed-dense-loose --where packing=dense --db "$DB" > "$OUT/envelope_dense.txt" 2>&1 || true
 "$DEMCAL" envelope --job seed-dense-loose --where packing=loose --db "$DB" > "$OUT/envelope_loose.txt" 2>&1 || true
+"$DEMCAL" envelope --job seed-dense-loose --where packing=dense --state cv --db "$DB" > "$OUT/envelope_cv_dense.txt" 2>&1 || true
+"$DEMCAL" envelope --job seed-dense-loose --where packing=loose --state cv --db "$DB" > "$OUT/envelope_cv_loose.txt" 2>&1 || true
 
 # query JOB METRICS...: CSV of the job's tasks with the given columns.
 query() {
@@ -326,12 +328,17 @@ damped_means() {
   echo '```'; cat "$OUT/envelope_dense.txt"; echo '```'
   echo
   echo "With two confining pressures the two-parameter line has no degree of freedom"
-  echo "left, so φ and c carry no standard error (nan); the zero-cohesion angle does."
+  echo "left, so φ and c carry no standard error (n/a); the zero-cohesion angle does."
   echo "The seed's Mohr–Coulomb angles at θ = 30°, η = 0.1: φ_peak 41.8°, φ_cv 32.6°."
   echo
   echo "Loose:"
   echo
   echo '```'; cat "$OUT/envelope_loose.txt"; echo '```'
+  echo
+  echo "The critical-state envelope (\`demcal envelope --state cv\`, through each test's φ_cv;"
+  echo "the seed's 32.6°), dense and loose, which reach the same critical state:"
+  echo
+  echo '```'; cat "$OUT/envelope_cv_dense.txt"; echo; cat "$OUT/envelope_cv_loose.txt"; echo '```'
   echo
   echo "## Angle of repose over η, θ = 30° (Fig. 2.15)"
   echo

@@ -857,7 +857,7 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   ASSERT_EQ(pair.rc, 0) << pair.err;
   EXPECT_EQ(pair.out.find("nan"), std::string::npos) << pair.out;
   EXPECT_NE(pair.out.find("+- n/a"), std::string::npos) << pair.out;
-  EXPECT_NE(pair.out.find("n/a: the line through two peaks"), std::string::npos) << pair.out;
+  EXPECT_NE(pair.out.find("n/a: the line through two tests"), std::string::npos) << pair.out;
   const auto r = run_demcal({"envelope", "--job", "mc"}, d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   std::printf("%s", r.out.c_str());
@@ -881,22 +881,30 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   // are counted, and a cohesion the grains cannot have is said.
   const std::string db = d.file("demcal.db");
   std::int64_t failed = 0, warned = 0;
-  std::string shifted;  // the point whose peaks all rise by 50 kPa: a line with an intercept
-  std::string lowered;  // and one whose peaks all fall by 30 kPa: a negative intercept, a tension
+  // The point whose sigma1 all rise by 50 kPa: a line with an intercept; and one whose
+  // sigma1 all fall by 30 kPa: a negative intercept, a tension. Written as the angles
+  // the envelope reads, sin phi = (s1 - s3) / (s1 + s3).
+  std::string moved;
+  auto angle_sql = [&](std::int64_t id, double s3, double phi, double ds1) {
+    const double s1 = s3 * (1 + std::sin(phi * M_PI / 180)) / (1 - std::sin(phi * M_PI / 180)) + ds1;
+    const double moved_phi = std::asin((s1 - s3) / (s1 + s3)) * 180 / M_PI;
+    moved += "UPDATE metrics SET value = " + std::to_string(moved_phi) + " WHERE name = 'phi_peak_deg' AND task_id = " +
+             std::to_string(id) + "; ";
+  };
   for (const auto& t : db::Store(db, true).tasks("mc")) {
     const auto q = nlohmann::json::parse(t.params_json);
-    if (q["theta_deg"] == 20 && q["eta"] == 0.2) lowered += (lowered.empty() ? "" : ", ") + std::to_string(t.id);
-    if (q["theta_deg"] == 20 && q["eta"] == 0.1 && q["confining_kpa"] == 50.0) failed = t.id;
-    if (q["theta_deg"] == 30 && q["eta"] == 0.2) {
-      shifted += (shifted.empty() ? "" : ", ") + std::to_string(t.id);
-      if (q["confining_kpa"] == 200.0) warned = t.id;
+    const double th = q["theta_deg"], et = q["eta"], p0 = q["confining_kpa"];
+    if (th == 20 && et == 0.2) angle_sql(t.id, p0, phi_peak_fn(th, et), -30.0);
+    if (th == 20 && et == 0.1 && p0 == 50.0) failed = t.id;
+    if (th == 30 && et == 0.1 && p0 == 100.0) angle_sql(t.id, p0, phi_peak_fn(th, et), 10.0);  // off the line
+    if (th == 30 && et == 0.2) {
+      angle_sql(t.id, p0, phi_peak_fn(th, et), 50.0);
+      if (p0 == 200.0) warned = t.id;
     }
   }
   sql(db, "UPDATE tasks SET status = 'failed', error = 'invalid in stage shear: the lateral walls lost sigma3' WHERE id = " +
               std::to_string(failed) + "; UPDATE tasks SET error = 'warning: not quasi-static: fast' WHERE id = " +
-              std::to_string(warned) + "; UPDATE metrics SET value = value + 50000 WHERE name = 'q_peak_pa' AND task_id IN (" +
-              shifted + "); UPDATE metrics SET value = value - 30000 WHERE name = 'q_peak_pa' AND task_id IN (" +
-              lowered + ")");
+              std::to_string(warned) + "; " + moved);
   const auto bad = run_demcal({"envelope", "--job", "mc"}, d.path.string());
   ASSERT_EQ(bad.rc, 0) << bad.err;
   EXPECT_NE(bad.out.find("left out at theta 20, eta 0.1: 50 kPa: task " + std::to_string(failed) +
@@ -907,6 +915,19 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   EXPECT_NE(bad.out.find("warning: theta 30, eta 0.2: cohesion "), std::string::npos) << bad.out;
   EXPECT_NE(bad.out.find("warning: theta 20, eta 0.2: cohesion -"), std::string::npos) << bad.out;
   EXPECT_NE(bad.out.find("a negative c is a tension"), std::string::npos) << bad.out;
+  // One test a pressure, one of them off the line: the errors rest on one degree of
+  // freedom, and the interval is Student's.
+  EXPECT_NE(bad.out.find("warning: theta 30, eta 0.1: the errors with cohesion rest on 1 degree(s) of freedom (3 tests, "
+                         "2 parameters): a 95% interval is 12.706 standard errors either side"),
+            std::string::npos)
+      << bad.out;
+  // The critical-state envelope reads phi_cv_deg, which the tampering above left alone.
+  const auto cv = run_demcal({"envelope", "--job", "mc", "--state", "cv"}, d.path.string());
+  ASSERT_EQ(cv.rc, 0) << cv.err;
+  EXPECT_NE(cv.out.find("from its phi_cv_deg"), std::string::npos) << cv.out;
+  EXPECT_EQ(cv.out.find(": cohesion"), std::string::npos) << cv.out;
+  const auto wrong = run_demcal({"envelope", "--job", "mc", "--state", "residual"}, d.path.string());
+  EXPECT_EQ(wrong.rc, 2) << wrong.out;
   // One pressure only: an error, and no table of rows that all say so.
   const auto one = run_demcal({"envelope", "--job", "mc50"}, d.path.string());
   EXPECT_EQ(one.rc, 2);

@@ -39,6 +39,21 @@ TEST(Envelope, MohrCoulombRecoversKnownFrictionAngleAndCohesion) {
   EXPECT_NEAR(z.c, 0, 1e-9);
   EXPECT_NEAR(z.phi0_deg, phi, 1e-9);
   EXPECT_THROW(calibrate::fit_envelope({100, 100}, {300, 310}), std::invalid_argument);
+  // sigma1 rising slower than sigma3 is no friction angle (it printed phi = -28 deg).
+  EXPECT_THROW(calibrate::fit_envelope({50, 100, 200}, {100, 120, 160}), std::invalid_argument);
+  EXPECT_EQ(z.dof, 10);
+}
+
+TEST(Envelope, StudentQuantilesForFewDegreesOfFreedom) {
+  EXPECT_NEAR(calibrate::t95(1), 12.706, 1e-3);
+  EXPECT_NEAR(calibrate::t95(2), 4.303, 1e-3);
+  EXPECT_NEAR(calibrate::t95(10), 2.228, 1e-3);
+  EXPECT_NEAR(calibrate::t95(1000), 1.96, 1e-3);
+  EXPECT_TRUE(std::isnan(calibrate::t95(0)));
+  // Each state reads its own stored angle.
+  EXPECT_STREQ(calibrate::state_metric(calibrate::EnvelopeState::peak), "phi_peak_deg");
+  EXPECT_STREQ(calibrate::state_metric(calibrate::EnvelopeState::smoothed), "phi_peak_smoothed_deg");
+  EXPECT_STREQ(calibrate::state_metric(calibrate::EnvelopeState::cv), "phi_cv_deg");
 }
 
 }  // namespace
