@@ -41,13 +41,34 @@ double t95(int dof) {
   return dof <= 30 ? 2.042 : 1.96;
 }
 
+namespace {
+
+// The zero-cohesion line sigma1 = N0 sigma3 through the origin, into e.phi0_*.
+void fit_through_origin(const std::vector<double>& s3, const std::vector<double>& s1, Envelope& e) {
+  double sxx0 = 0, sxy0 = 0;
+  for (int i = 0; i < e.n; ++i) sxx0 += s3[i] * s3[i], sxy0 += s3[i] * s1[i];
+  const double N0 = sxy0 / sxx0;
+  if (!(N0 > 1)) throw std::invalid_argument("sigma1/sigma3 is not above 1: no positive friction angle");
+  double rss0 = 0;
+  for (int i = 0; i < e.n; ++i) rss0 += std::pow(s1[i] - N0 * s3[i], 2);
+  e.phi0_deg = phi_of(N0);
+  e.phi0_se = e.n > 1 ? dphi_dN(N0) * std::sqrt(rss0 / (e.n - 1) / sxx0) : NAN;
+}
+
+}  // namespace
+
 Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& s1) {
   if (s3.size() != s1.size()) throw std::invalid_argument("sigma3 and sigma1 differ in length");
+  if (s3.empty()) throw std::invalid_argument("no tests");
   Envelope e;
   e.n = static_cast<int>(s3.size());
   e.dof = e.n - 2;
   e.pressures = static_cast<int>(std::set<double>(s3.begin(), s3.end()).size());
-  if (e.pressures < 2) throw std::invalid_argument("an envelope needs at least two confining pressures");
+  fit_through_origin(s3, s1, e);
+  if (e.pressures < 2) {  // one pressure: the secant angle only; a line with cohesion needs two
+    e.phi_deg = e.phi_se = e.c = e.c_se = NAN;
+    return e;
+  }
   const double n = e.n;
   double mx = 0, my = 0;
   for (int i = 0; i < e.n; ++i) mx += s3[i], my += s1[i];
@@ -68,14 +89,6 @@ Envelope fit_envelope(const std::vector<double>& s3, const std::vector<double>& 
   e.c = b / (2 * rN);
   const double dcdb = 1 / (2 * rN), dcdN = -b / (4 * N * rN);
   e.c_se = std::sqrt(dcdb * dcdb * varb + dcdN * dcdN * varN + 2 * dcdb * dcdN * covNb);
-  // Through the origin.
-  double sxx0 = 0, sxy0 = 0;
-  for (int i = 0; i < e.n; ++i) sxx0 += s3[i] * s3[i], sxy0 += s3[i] * s1[i];
-  const double N0 = sxy0 / sxx0;
-  double rss0 = 0;
-  for (int i = 0; i < e.n; ++i) rss0 += std::pow(s1[i] - N0 * s3[i], 2);
-  e.phi0_deg = phi_of(N0);
-  e.phi0_se = dphi_dN(N0) * std::sqrt(rss0 / (n - 1) / sxx0);
   return e;
 }
 

@@ -17,13 +17,14 @@ struct Envelope {
   int n = 0;                      // (sigma3, sigma1) pairs
   int dof = 0;                    // n - 2: what the errors with cohesion rest on
   int pressures = 0;              // distinct sigma3
-  double phi_deg = 0, phi_se = 0; // with cohesion (se NaN with fewer than 3 pairs)
-  double c = 0, c_se = 0;         // cohesion, in the units of sigma
+  double phi_deg = 0, phi_se = 0; // with cohesion (NaN at one pressure; se NaN with fewer than 3 pairs)
+  double c = 0, c_se = 0;         // cohesion, in the units of sigma (NaN at one pressure)
   double phi0_deg = 0, phi0_se = 0;  // zero cohesion
 };
 
-// Throws std::invalid_argument with fewer than 2 distinct sigma3 values, or a slope
-// N <= 1 (no positive friction angle).
+// With one distinct sigma3, only the zero-cohesion line (the tests' secant angle; phi
+// and c NaN). Throws std::invalid_argument without tests, or for a slope N <= 1 (no
+// positive friction angle).
 Envelope fit_envelope(const std::vector<double>& sigma3, const std::vector<double>& sigma1);
 
 // Which angle of each test the envelope is drawn through.

@@ -202,18 +202,16 @@ void add_envelope(CLI::App& app, int& exit_code) {
                                                                       : calibrate::EnvelopeState::peak;
       const auto envs = calibrate::job_envelopes(store, job, where, state);
       if (std::all_of(envs.begin(), envs.end(), [](const auto& e) { return !e.note.empty(); }))
-        throw jobs::JobError("--job", "job \"" + job + "\" has no (theta, eta) with finished tasks at two or more "
-                                      "confining pressures (" + envs.front().note + ")");
+        throw jobs::JobError("--job", "job \"" + job + "\" has no (theta, eta) with an envelope (" + envs.front().note + ")");
       std::printf("%8s %8s %4s %5s  %18s  %18s  %18s\n", "theta", "eta", "n", "p", "phi (deg)", "c (kPa)", "phi, c=0 (deg)");
-      // Two peaks fix the line exactly: no standard error (NaN), said as n/a.
-      bool unknown_se = false;
-      auto se = [&](double s) {
+      // Two tests fix a line exactly, one test the secant: no standard error (NaN), said as n/a.
+      bool two_tests = false, one_pressure = false;
+      auto se = [](double s) {
         char buf[16];
         if (std::isfinite(s))
           std::snprintf(buf, sizeof buf, "%-6.2g", s);
         else
           std::snprintf(buf, sizeof buf, "%-6s", "n/a");
-        unknown_se = unknown_se || !std::isfinite(s);
         return std::string(buf);
       };
       for (const auto& e : envs) {
@@ -221,6 +219,13 @@ void add_envelope(CLI::App& app, int& exit_code) {
           std::printf("%8.4g %8.4g %4zu %5s  %s\n", e.theta, e.eta, e.sigma3_kpa.size(), "-", e.note.c_str());
           continue;
         }
+        if (e.env.pressures < 2) {
+          one_pressure = true;
+          std::printf("%8.4g %8.4g %4d %5d  %18s  %18s  %8.3f +- %s\n", e.theta, e.eta, e.env.n, e.env.pressures,
+                      "n/a (one pressure)", "n/a", e.env.phi0_deg, se(e.env.phi0_se).c_str());
+          continue;
+        }
+        two_tests = two_tests || e.env.n == 2;
         std::printf("%8.4g %8.4g %4d %5d  %8.3f +- %s  %8.3g +- %s  %8.3f +- %s\n", e.theta, e.eta, e.env.n, e.env.pressures,
                     e.env.phi_deg, se(e.env.phi_se).c_str(), e.env.c, se(e.env.c_se).c_str(), e.env.phi0_deg,
                     se(e.env.phi0_se).c_str());
@@ -229,8 +234,11 @@ void add_envelope(CLI::App& app, int& exit_code) {
                    "N = tan^2(45 + phi/2), least squares over the tests, each at sigma3 = its confining pressure and "
                    "sigma1 = sigma3 (1 + sin phi) / (1 - sin phi) from its "
                 << calibrate::state_metric(state) << "; +- one standard error (n - 2 degrees of freedom; c = 0: n - 1)\n";
-      if (unknown_se)
+      if (two_tests)
         std::cout << "n/a: the line through two tests fits them exactly and has no standard error; it takes three\n";
+      if (one_pressure)
+        std::cout << "one pressure: a line with cohesion takes two; phi at c = 0 is then the tests' secant angle, "
+                     "sin phi = (sigma1 - sigma3) / (sigma1 + sigma3), their mean stress ratio's (one test: no error)\n";
       print_envelope_caveats(envs, state, jobs::query_hint(a->db, job));
       return kOk;
     });

@@ -38,7 +38,15 @@ TEST(Envelope, MohrCoulombRecoversKnownFrictionAngleAndCohesion) {
   EXPECT_NEAR(z.phi_deg, phi, 1e-9);
   EXPECT_NEAR(z.c, 0, 1e-9);
   EXPECT_NEAR(z.phi0_deg, phi, 1e-9);
-  EXPECT_THROW(calibrate::fit_envelope({100, 100}, {300, 310}), std::invalid_argument);
+  // One pressure: the secant angle only, from the mean ratio (sigma1 = 3.05 sigma3: 30.6 deg).
+  const auto one = calibrate::fit_envelope({100, 100}, {300, 310});
+  EXPECT_EQ(one.pressures, 1);
+  EXPECT_TRUE(std::isnan(one.phi_deg));
+  EXPECT_TRUE(std::isnan(one.c));
+  EXPECT_NEAR(one.phi0_deg, std::asin(2.05 / 4.05) * 180 / M_PI, 1e-9);
+  EXPECT_GT(one.phi0_se, 0.0);
+  EXPECT_TRUE(std::isnan(calibrate::fit_envelope({100}, {300}).phi0_se));
+  EXPECT_THROW(calibrate::fit_envelope({}, {}), std::invalid_argument);
   // sigma1 rising slower than sigma3 is no friction angle (it printed phi = -28 deg).
   EXPECT_THROW(calibrate::fit_envelope({50, 100, 200}, {100, 120, 160}), std::invalid_argument);
   EXPECT_EQ(z.dof, 10);
