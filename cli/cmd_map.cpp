@@ -139,15 +139,18 @@ void print_envelope_caveats(const std::vector<calibrate::PointEnvelope>& envs, c
   for (const auto& e : envs) {
     if (!e.note.empty()) continue;
     // A standard error from one or two residuals: its 95% interval is Student's, not 2 se.
-    // (On exact data the errors are round-off: nothing to widen.)
+    // (On exact data the errors are round-off: nothing to widen.) The line with
+    // cohesion first; without it, the zero-cohesion line's.
+    const auto few_dof = [&](const char* which, int dof, int parameters) {
+      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": " << which << " on " << dof
+                << " degree(s) of freedom (" << e.env.n << " tests, " << parameters << " parameter"
+                << (parameters > 1 ? "s" : "") << "): a 95% interval is " << calibrate::t95(dof)
+                << " standard errors either side, not 2 (replicas narrow it)\n";
+    };
     if (e.env.dof >= 1 && e.env.dof <= 2 && e.env.phi_se > 1e-6)
-      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": the errors with cohesion rest on "
-                << e.env.dof << " degree(s) of freedom (" << e.env.n << " tests, 2 parameters): a 95% interval is "
-                << calibrate::t95(e.env.dof) << " standard errors either side, not 2 (replicas narrow it)\n";
+      few_dof("the errors with cohesion rest", e.env.dof, 2);
     else if (e.env.n - 1 <= 2 && e.env.phi0_se > 1e-6)
-      std::cout << "warning: theta " << e.theta << ", eta " << e.eta << ": the zero-cohesion angle's error rests on "
-                << e.env.n - 1 << " degree(s) of freedom (" << e.env.n << " tests, 1 parameter): a 95% interval is "
-                << calibrate::t95(e.env.n - 1) << " standard errors either side, not 2 (replicas narrow it)\n";
+      few_dof("the zero-cohesion angle's error rests", e.env.n - 1, 1);
     // Beyond the 95% interval and a fiftieth of the mean pressure (on exact data both c
     // and its error are round-off); with two tests, beyond a tenth of their mean. Either
     // sign: a negative intercept is a tension the grains cannot carry.

@@ -161,9 +161,9 @@ FloorGrid floor_grid(const ReposeConfig& c) {
 }
 }  // namespace
 
-double ReposeConfig::column_bins() const {
-  return column_width / (bin_width > 0.0 ? bin_width : material.grading().mean());
-}
+double ReposeConfig::profile_bin() const { return bin_width > 0.0 ? bin_width : material.grading().mean(); }
+
+double ReposeConfig::column_bins() const { return column_width / profile_bin(); }
 
 double ReposeConfig::weight_overlap() const {
   const double d = material.grading().mean();
@@ -348,7 +348,7 @@ ReposeSizes sizes_of(const ReposeConfig& cfg) {
   z.Ly = cfg.slab_depth_diameters * z.d_mean;
   z.L = domain_length_of(cfg);
   z.g = cfg.gravity;
-  z.bin = cfg.bin_width > 0.0 ? cfg.bin_width : z.d_mean;
+  z.bin = cfg.profile_bin();
   return z;
 }
 
@@ -667,16 +667,16 @@ std::string judge_by_profile(const ReposeConfig& cfg, double time_now, double bi
     for (const auto& row : res.energy.rows) v.push_back(row[c]);
     return v;
   };
-  still = heap_stillness(col("time"), col("front_x"), col("repose_deg"), time_now - cfg.rest_profile_window,
-                         cfg.min_collapse_time);
+  const std::vector<double> time = col("time"), front = col("front_x"), angle = col("repose_deg");
+  still = heap_stillness(time, front, angle, time_now - cfg.rest_profile_window, cfg.min_collapse_time);
   std::ostringstream note;
   if (still.judged) {
     res.profile_angle_change_deg = still.angle_change_deg;
     res.profile_front_change_m = still.front_change_m;
     res.rest_by_profile = still.angle_change_deg <= cfg.rest_profile_tol_deg && still.front_change_m <= bin;
     if (res.rest_by_profile) {
-      const double since = still_since(col("time"), col("front_x"), col("repose_deg"), cfg.rest_profile_window,
-                                       cfg.min_collapse_time, cfg.rest_profile_tol_deg, bin);
+      const double since = still_since(time, front, angle, cfg.rest_profile_window, cfg.min_collapse_time,
+                                       cfg.rest_profile_tol_deg, bin);
       if (since < still.since) still.since = since;  // NaN (the blocks judged otherwise): the window's start
     }
     note << "over the last " << cfg.rest_profile_window << " s the heap's angle moved by " << still.angle_change_deg

@@ -146,9 +146,11 @@ struct ReposeConfig {
   // to it (1e-6 on the seed's material, the quick column: 0.035 here, and an overlap
   // of 0.27 of the radius in the collapse).
   double weight_overlap() const;
-  // The column's width in profile bins (repose.bin_width, by default the mean
-  // diameter): a column a few bins wide heaps a slope of fewer bins (a 6 mm column of
-  // 1-2 mm grains, 4 bins, fitted its heap over 6 bins and a 5 mm one over fewer).
+  // The profile's bin: bin_width, by default the mean diameter.
+  double profile_bin() const;
+  // The column's width in profile bins: a column a few bins wide heaps a slope of
+  // fewer bins (a 6 mm column of 1-2 mm grains, 4 bins, fitted its heap over 6 bins
+  // and a 5 mm one over fewer).
   double column_bins() const;
   static constexpr double kWeightOverlapNote = 0.02;  // validate notes above this
   bool profile_check_has_no_room() const { return rest_profile_window > 0.0 && time_limit < profile_check_time(); }

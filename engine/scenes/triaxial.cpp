@@ -488,11 +488,17 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
 // for two rows of 0.001 strain at eps1 = 0.10, the interior's not at all, then the
 // kinetic energy up sevenfold as the chain gave way) sets the maximum of the rows
 // without being the material's peak strength.
+// The axial strain of one shear step: how far a series row may lie from its nominal
+// strain, either side (rows are taken within half of it).
+namespace {
+double shear_step_strain(const TriaxialConfig& cfg, const TriaxialResult& res) { return cfg.strain_rate * res.dt; }
+}  // namespace
+
 void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
   const bool at_end = res.peak_rows_to_end >= 0 && res.peak_rows_to_end < TriaxialResult::kPeakSmoothingRows / 2;
   // A loose sample hardens into its critical state: its largest row is one of the
   // window's (34.0 deg at eps1 0.288, 4.6 deg above phi_cv, read as a peak).
-  if (cfg.in_cv_window(res.eps1_at_peak, cfg.strain_rate * res.dt))
+  if (cfg.in_cv_window(res.eps1_at_peak, shear_step_strain(cfg, res)))
     res.outcome.warnings.push_back("phi_peak " + fmt(res.phi_peak_deg) + " deg lies at eps1 " +
                                    fmt(res.eps1_at_peak, 3) + ", inside the critical-state window (eps1 " +
                                    fmt(cfg.cv_from) + "-" + fmt(cfg.cv_to) +
@@ -788,7 +794,7 @@ void angles_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
       res.peak_rows_to_end = static_cast<int>(s.rows.size() - sines.size());
     }
     best_in = std::max(best_in, x_in);
-    if (cfg.in_cv_window(r[c_e1], cfg.strain_rate * res.dt)) {
+    if (cfg.in_cv_window(r[c_e1], shear_step_strain(cfg, res))) {
       cv.push_back(x);
       cv_in += x_in;
       if (r[c_p] > 0.0) {  // a row the walls carried nothing in has no ratio (such rows are warned)
@@ -840,7 +846,7 @@ void judge_window(const TriaxialConfig& cfg, TriaxialResult& res) {
   int n = 0;
   res.cv_rows_in_extension = res.cv_rows_unloaded = 0;
   for (const auto& r : s.rows) {
-    if (!cfg.in_cv_window(r[c_e1], cfg.strain_rate * res.dt)) continue;
+    if (!cfg.in_cv_window(r[c_e1], shear_step_strain(cfg, res))) continue;
     z += r[c_z];
     ++n;
     res.cv_rows_unloaded += r[c_s1] <= 0.0;
@@ -893,7 +899,7 @@ void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
   res.porosity_interior_final = s.rows.back()[s.column("porosity_interior")];
   res.eps_v_final = s.rows.back()[c_ev];
   // Rows lie up to half a shear step from their strain (TriaxialConfig::in_cv_window).
-  const double span = cfg.dilatancy_window - cfg.strain_rate * res.dt - 1e-9;
+  const double span = cfg.dilatancy_window - shear_step_strain(cfg, res) - 1e-9;
   res.max_dilatancy_deg = NAN;
   for (std::size_t i = 0; i < s.rows.size(); ++i) {
     for (std::size_t j = i + 1; j < s.rows.size(); ++j) {
