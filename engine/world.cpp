@@ -272,11 +272,17 @@ void World::force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc
   if (lanes > 0) flush();
 }
 
-void World::update_wall_candidates() {
+// Whether the lists of grains near each wall are out of date: the neighbour list was
+// rebuilt since, or a wall has moved more than half the skin.
+bool World::wall_candidates_stale() const {
   bool stale = nl_.builds() != wall_list_builds_ || wall_near_.size() != walls_.size();
   for (std::size_t w = 0; !stale && w < walls_.size(); ++w)
     stale = std::abs((walls_[w].point - wall_point_build_[w]).dot(walls_[w].normal)) > 0.5 * skin_;
-  if (!stale) return;
+  return stale;
+}
+
+void World::update_wall_candidates() {
+  if (!wall_candidates_stale()) return;
   wall_near_.assign(walls_.size(), {});
   wall_point_build_.resize(walls_.size());
   for (std::size_t w = 0; w < walls_.size(); ++w) {
@@ -555,44 +561,54 @@ void World::add_lower_buffers(int blk) {
   }
 }
 
-// One parallel region per force evaluation. Each thread owns one block of grains:
-// it clears their forces, runs their pair rows (forces on grains above the block go
-// to its buffer), adds the buffered forces the blocks below put on its grains, then
-// does its grains' wall contacts, external forces and (with `kick`) second
-// half-kick, which need no barrier between them.
-bool World::evaluate_forces(bool rebuild, bool kick) {
-  auto clock = std::chrono::steady_clock::now();
+// Serial set-up of a force evaluation: the list rebuilt when `rebuild`, the wall
+// candidates, the blocks, and the per-thread sums cleared.
+void World::begin_forces(bool rebuild, std::chrono::steady_clock::time_point& clock) {
   if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
-  const int nt = opt_.threads;
   if (nl_.builds() != blocks_builds_ || !blocks_fit()) assign_blocks();
   times_.neighbor += seconds_since(clock);
+  clear_thread_sums();
+}
+
+void World::clear_thread_sums() {
+  acc_.assign(static_cast<std::size_t>(opt_.threads), ThreadAcc{});
+  wall_part_.assign(static_cast<std::size_t>(opt_.threads) * walls_.size(), WallPartial{});
+}
+
+// One thread's share of a force evaluation, inside a parallel region. Each thread
+// owns one block of grains: it clears their forces, runs their pair rows (forces on
+// grains above the block go to its buffer), adds the buffered forces the blocks below
+// put on its grains, then does its grains' wall contacts, external forces and (with
+// `kick`) second half-kick, which need no barrier between them. Thread 0 alone reads
+// and resets the clock.
+void World::block_forces(bool kick, std::chrono::steady_clock::time_point& clock, double& t_pairs,
+                         double& t_walls) {
+  // One block per thread; a smaller team (a build without OpenMP, a thread limit)
+  // takes the blocks in turn, so that every grain is still done.
+  const int nt = opt_.threads, tid = thread_id(), team = team_size();
   const std::size_t nw = walls_.size();
-  acc_.assign(nt, ThreadAcc{});
-  wall_part_.assign(static_cast<std::size_t>(nt) * nw, WallPartial{});
   const bool periodic = dom_.any_periodic();
   const bool frictional = law_.ks > 0.0;
-  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
-
-#pragma omp parallel num_threads(nt)
-  {
-    // One block per thread; a smaller team (a build without OpenMP, a thread limit)
-    // takes the blocks in turn, so that every grain is still done.
-    const int tid = thread_id(), team = team_size();
-    for (int blk = tid; blk < nt; blk += team) block_pairs(blk, periodic, frictional);
+  for (int blk = tid; blk < nt; blk += team) block_pairs(blk, periodic, frictional);
 #pragma omp barrier
-    if (tid == 0) t_pairs += seconds_since(clock);  // thread 0 alone reads and resets the clock
-    for (int blk = tid; blk < nt; blk += team) {
-      const int lo = row_lo_[blk], hi = row_lo_[blk + 1];
-      add_lower_buffers(blk);
-      if (tid == 0) t_pairs += seconds_since(clock);
-      wall_forces(lo, hi, acc_[blk], wall_part_.data() + static_cast<std::size_t>(blk) * nw);
-      if (tid == 0) t_walls += seconds_since(clock);
-      external_forces(lo, hi, acc_[blk]);
-      if (kick) half_kick(lo, hi, acc_[blk]);
-    }
+  if (tid == 0) t_pairs += seconds_since(clock);
+  for (int blk = tid; blk < nt; blk += team) {
+    const int lo = row_lo_[blk], hi = row_lo_[blk + 1];
+    add_lower_buffers(blk);
+    if (tid == 0) t_pairs += seconds_since(clock);
+    wall_forces(lo, hi, acc_[blk], wall_part_.data() + static_cast<std::size_t>(blk) * nw);
+    if (tid == 0) t_walls += seconds_since(clock);
+    external_forces(lo, hi, acc_[blk]);
+    if (kick) half_kick(lo, hi, acc_[blk]);
   }
+}
 
+// The threads' sums added up in block order (deterministic for a thread count).
+// Returns whether all grains are finite.
+bool World::end_forces(std::chrono::steady_clock::time_point& clock, double t_pairs, double t_walls) {
+  const std::size_t nw = walls_.size();
+  const int nt = opt_.threads;
   for (std::size_t w = 0; w < nw; ++w) {
     Wall& wall = walls_[w];
     wall.force.setZero();
@@ -609,7 +625,7 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   damped_ = opt_.local_damping > 0.0;
   net_force_sum_ = 0.0;
   bool finite = true;
-  for (const auto& a : acc_) {  // in block order: deterministic for a thread count
+  for (const auto& a : acc_) {
     finite = finite && a.finite;
     net_force_sum_ += a.net_force_sum;
     if (a.max_overlap > max_overlap_ratio_) {
@@ -624,12 +640,22 @@ bool World::evaluate_forces(bool rebuild, bool kick) {
   return finite;
 }
 
-// The first half-kick and the drift of every grain, with the Verlet-skin test folded
-// in when there is a list for these grains (`listed`); returns whether some grain has
-// used up half the skin. Periodic is a template argument so that the open box, the
-// common case, tests no axis per grain.
+// One parallel region per force evaluation.
+bool World::evaluate_forces(bool rebuild, bool kick) {
+  auto clock = std::chrono::steady_clock::now();
+  begin_forces(rebuild, clock);
+  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
+#pragma omp parallel num_threads(opt_.threads)
+  block_forces(kick, clock, t_pairs, t_walls);
+  return end_forces(clock, t_pairs, t_walls);
+}
+
+// The first half-kick and the drift of block `blk`'s grains, with the Verlet-skin
+// test folded in when there is a list for these grains (`listed`); returns whether
+// some grain has used up half the skin. Periodic is a template argument so that the
+// open box, the common case, tests no axis per grain.
 template <bool Periodic>
-bool World::drift(bool listed) {
+bool World::drift_block(int blk, bool listed) {
   const double dt = opt_.dt, half = 0.5 * dt, skin = skin_;
   const Domain dom = dom_;
   const VerletArrays a(p_);
@@ -637,25 +663,63 @@ bool World::drift(bool listed) {
   const Vec3* xb = nl_.build_positions();
   const double* rb = nl_.build_radii();
   bool stale = false;
-  // Each thread drifts the block whose forces it evaluated: the lines are in its cache.
-#pragma omp parallel num_threads(opt_.threads) firstprivate(a) reduction(|| : stale)
-  for (int blk = thread_id(); blk < opt_.threads; blk += team_size()) {
-    for (int i = block_lo(blk), end = block_lo(blk + 1); i < end; ++i) {
-      a.kick(i, half);
-      a.x[i] += dt * a.v[i];
-      if constexpr (Periodic) dom.wrap(a.x[i]);
-      if (!listed) continue;
-      Vec3 d = a.x[i] - xb[i];
-      if constexpr (Periodic) dom.min_image(d);
-      stale |= NeighborList::moved_too_far(d, r[i], rb[i], skin);
-    }
+  for (int i = block_lo(blk), end = block_lo(blk + 1); i < end; ++i) {
+    a.kick(i, half);
+    a.x[i] += dt * a.v[i];
+    if constexpr (Periodic) dom.wrap(a.x[i]);
+    if (!listed) continue;
+    Vec3 d = a.x[i] - xb[i];
+    if constexpr (Periodic) dom.min_image(d);
+    stale |= NeighborList::moved_too_far(d, r[i], rb[i], skin);
   }
   return stale;
 }
 
-// Two parallel regions a step: the first half-kick and drift (with the Verlet-skin
-// test folded in), then the force evaluation, which ends with each thread's second
-// half-kick of the grains it reduced.
+// The drift of every grain in a parallel region of its own. Each thread drifts the
+// block whose forces it evaluated: the lines are in its cache.
+template <bool Periodic>
+bool World::drift(bool listed) {
+  bool stale = false;
+#pragma omp parallel num_threads(opt_.threads) reduction(|| : stale)
+  for (int blk = thread_id(); blk < opt_.threads; blk += team_size()) stale |= drift_block<Periodic>(blk, listed);
+  return stale;
+}
+
+// A whole step in one parallel region, for the common step that keeps its lists:
+// each thread drifts its block, and after a barrier, unless some grain has used up
+// half the skin, evaluates its block's forces and kicks it. The fork and join of a
+// region cost about as much as a 2,000-grain block's drift; a step with two regions
+// paid for them twice. Returns false, with every grain drifted and no forces
+// evaluated, when the list must be rebuilt.
+template <bool Periodic>
+bool World::drift_and_forces(bool& finite) {
+  auto clock = std::chrono::steady_clock::now();
+  clear_thread_sums();
+  const int nt = opt_.threads;
+  bool rebuild = false;
+  double t_pairs = 0.0, t_walls = 0.0;  // thread 0's view of the phases
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = thread_id(), team = team_size();
+    for (int blk = tid; blk < nt; blk += team) acc_[blk].stale = drift_block<Periodic>(blk, true);
+#pragma omp barrier
+    bool any = false;  // every thread reads the same flags, so all take the same branch
+    for (int t = 0; t < nt; ++t) any = any || acc_[t].stale;
+    if (tid == 0) {
+      rebuild = any;
+      times_.integrate += seconds_since(clock);
+    }
+    if (!any) block_forces(true, clock, t_pairs, t_walls);
+  }
+  if (rebuild) return false;
+  finite = end_forces(clock, t_pairs, t_walls);
+  return true;
+}
+
+// Usually one parallel region a step (drift_and_forces). A step that rebuilds a list
+// takes two: the first half-kick and drift (with the Verlet-skin test folded in),
+// then the force evaluation, which ends with each thread's second half-kick of the
+// grains it reduced.
 void World::step() {
   if (!forces_valid_) compute_forces();
   auto clock = std::chrono::steady_clock::now();
@@ -664,14 +728,22 @@ void World::step() {
   // Work done on the grains by moving walls over this step (trapezoidal rule).
   double wall_power_before = 0.0;
   for (const auto& wall : walls_) wall_power_before -= wall.force.dot(wall.velocity);
-
-  const bool listed = nl_.built_for(p_.size());
-  const bool moved = dom_.any_periodic() ? drift<true>(listed) : drift<false>(listed);
-  const bool stale = !listed || moved;
+  // The walls move before the grains drift; the drift does not read them.
   for (auto& wall : walls_) wall.point += dt * wall.velocity;
-  times_.integrate += seconds_since(clock);
 
-  const bool finite = evaluate_forces(stale, true);
+  const bool periodic = dom_.any_periodic();
+  const bool listed = nl_.built_for(p_.size());
+  bool finite = true;
+  bool done = false;
+  if (listed && nl_.builds() == blocks_builds_ && blocks_fit() && !wall_candidates_stale()) {
+    times_.integrate += seconds_since(clock);
+    done = periodic ? drift_and_forces<true>(finite) : drift_and_forces<false>(finite);
+    if (!done) finite = evaluate_forces(true, true);  // drifted; the list is stale
+  } else {
+    const bool moved = periodic ? drift<true>(listed) : drift<false>(listed);
+    times_.integrate += seconds_since(clock);
+    finite = evaluate_forces(!listed || moved, true);
+  }
 
   double wall_power_after = 0.0;
   for (const auto& wall : walls_) wall_power_after -= wall.force.dot(wall.velocity);

@@ -8,6 +8,7 @@
 #include "particles.hpp"
 #include "wall.hpp"
 
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,7 @@ struct alignas(64) ThreadAcc {
   long max_overlap_i = -1;
   bool finite = true;        // the thread's grains ended the step with finite x, v, w
   double net_force_sum = 0.0;  // sum of |F| over the thread's free grains before local damping
+  bool stale = false;        // a grain of the thread's block used up half the Verlet skin
 };
 // Where a thread's pair loop puts forces and torques: grains below `bound` (its own
 // block) in the grains' arrays, grains at or above it in the thread's buffers.
@@ -136,9 +138,17 @@ class World {
   // `rebuild`); with `kick`, each thread then ends the step of its own grains (the
   // second half-kick) in the same parallel region. Returns whether all grains are finite.
   bool evaluate_forces(bool rebuild, bool kick);
+  void begin_forces(bool rebuild, std::chrono::steady_clock::time_point& clock);
+  void clear_thread_sums();
+  void block_forces(bool kick, std::chrono::steady_clock::time_point& clock, double& t_pairs, double& t_walls);
+  bool end_forces(std::chrono::steady_clock::time_point& clock, double t_pairs, double t_walls);
   void half_kick(int begin, int end, ThreadAcc& acc);
   template <bool Periodic>
+  bool drift_block(int blk, bool listed);
+  template <bool Periodic>
   bool drift(bool listed);
+  template <bool Periodic>
+  bool drift_and_forces(bool& finite);
   template <bool Periodic, bool Friction>
   void force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc);
   void assign_blocks();
@@ -146,6 +156,7 @@ class World {
   void add_lower_buffers(int blk);
   bool blocks_fit() const;
   int block_lo(int tid) const;
+  bool wall_candidates_stale() const;
   void update_wall_candidates();
   void wall_forces(int begin, int end, ThreadAcc& acc, WallPartial* part);
   // A grain-wall contact that is open (or cannot be closed) keeps no history.
