@@ -71,6 +71,26 @@ TEST(ReposeProfile, LineThroughTriangularHeapRecoversItsSlope) {
   }
 }
 
+TEST(ReposeProfile, AngleErrorIsTheSlopeErrorCarriedThroughTheArctangent) {
+  // A 40 deg heap with alternating +-0.3 mm bumps: the slope has a standard error,
+  // and the angle's is that error seen through atan (a central difference here, not
+  // the formula the fit uses): at 40 deg it is 0.59 of the slope's, in radians.
+  std::vector<double> x, h;
+  int k = 0;
+  for (double xi = 0.0005; xi < 0.15; xi += 0.001, ++k) {
+    x.push_back(xi);
+    h.push_back(heap_height(xi, 40.0, 0.03, 0.02) + (k % 2 ? 3e-4 : -3e-4));
+  }
+  const SlopeFit f = fit_slope(x, h, 0.2, 0.8);
+  ASSERT_TRUE(f.ok) << f.why;
+  ASSERT_GT(f.slope_se, 0.0);
+  const double s = std::abs(f.slope), ds = 1e-3 * f.slope_se;
+  const double through_atan = (std::atan(s + ds) - std::atan(s - ds)) / (2.0 * ds) * f.slope_se * 180.0 / M_PI;
+  EXPECT_NEAR(f.angle_err_deg / through_atan, 1.0, 1e-6);
+  EXPECT_NEAR(f.angle_err_deg / (f.slope_se * 180.0 / M_PI), 1.0 / (1.0 + s * s), 1e-6);
+  EXPECT_LT(f.angle_err_deg, 0.7 * f.slope_se * 180.0 / M_PI);
+}
+
 TEST(ReposeProfile, HeapBuiltOfGrainsGivesItsSlopeWithinHalfADegree) {
   // Polydisperse grains (d in [1, 2] mm) filling a 31.3 deg heap 40 mm high: each
   // column of the heap is stacked from the floor up until the next grain would

@@ -760,6 +760,49 @@ TEST(Measurements, CoordinationAndEnergiesOfAKnownPair) {
   EXPECT_NEAR(e.normal, 0.5 * 3e7 * 1e-6 * 1e-6, 1e-15);
 }
 
+// Thornton's mechanical coordination, (2C - N1) / (N - N0 - N1): a triangle of three
+// touching grains, a fourth hanging on one of them and a fifth touching nothing.
+// Z = 3, 2, 2, 1, 0: all 8/5; without the rattlers and the pendant's contact, 7/3.
+TEST(Measurements, MechanicalCoordinationDropsRattlersAndTheirContacts) {
+  Particles p;
+  const double d = 1.999e-3;
+  p.add(Vec3(0, 0, 0), 1e-3, kDensity);
+  p.add(Vec3(d, 0, 0), 1e-3, kDensity);
+  p.add(Vec3(0.5 * d, d * std::sqrt(0.75), 0), 1e-3, kDensity);
+  p.add(Vec3(-d, 0, 0), 1e-3, kDensity);   // hangs on grain 0 only
+  p.add(Vec3(1.0, 0, 0), 1e-3, kDensity);  // touches nothing
+  World w(std::move(p), {}, open_domain(), law(3e7, 0.0), options(safe_dt()));
+  w.refresh();
+  const Region all{Vec3::Constant(-1), Vec3::Constant(2)};
+  for (const Coordination& c : {coordination(w), coordination(w, all)}) {
+    EXPECT_EQ(c.contacts, 4);
+    EXPECT_EQ(c.rattlers, 2);
+    EXPECT_NEAR(c.all, 8.0 / 5.0, 1e-12);
+    EXPECT_NEAR(c.mechanical, 7.0 / 3.0, 1e-12);
+  }
+}
+
+// Love-Weber over a volume: each grain inside adds its own half of a contact, the
+// branch from its centre to the contact point times the force. For one compressed
+// pair of unequal radii along x, sigma_xx = arm * Kn * delta / V with the arm of the
+// grain the volume holds, and the two halves add up to the centre distance.
+TEST(Stress, LoveWeberTakesTheHalfOfAContactThatIsInside) {
+  const double ri = 1e-3, rj = 0.5e-3, delta = 1e-6, kn = 3e7;
+  Particles p;
+  p.add(Vec3(0, 0, 0), ri, kDensity);
+  p.add(Vec3(ri + rj - delta, 0, 0), rj, kDensity);
+  World w(std::move(p), {}, open_domain(), law(kn, 0.0), options(safe_dt()));
+  w.refresh();
+  const Region only_i{Vec3(-2e-3, -1e-3, -1e-3), Vec3(0.5e-3, 1e-3, 1e-3)};
+  const Region only_j{Vec3(0.5e-3, -1e-3, -1e-3), Vec3(3e-3, 1e-3, 1e-3)};
+  const Region both{Vec3(-2e-3, -1e-3, -1e-3), Vec3(3e-3, 1e-3, 1e-3)};
+  const double f = kn * delta;
+  EXPECT_NEAR(love_weber_stress(w, only_i)(0, 0), (ri - 0.5 * delta) * f / only_i.volume(), 1e-9 * f / only_i.volume());
+  EXPECT_NEAR(love_weber_stress(w, only_j)(0, 0), (rj - 0.5 * delta) * f / only_j.volume(), 1e-9 * f / only_j.volume());
+  EXPECT_NEAR(love_weber_stress(w, both)(0, 0), (ri + rj - delta) * f / both.volume(), 1e-9 * f / both.volume());
+  EXPECT_GT(love_weber_stress(w, both)(0, 0), 0.0);  // compression reads positive
+}
+
 // Over a region, a grain counts every contact it has, with grains outside the region
 // and with walls: a chain floor - a - b - c with only a and b inside reads Z = 2 for
 // both (a: floor and b; b: a and c), where the whole-box count gives a only one.
