@@ -4,6 +4,7 @@
 #include "engine/errors.hpp"
 #include "engine/particles.hpp"
 #include "engine/scenes/triaxial.hpp"
+#include "engine/series_stats.hpp"
 #include "engine/servo_wall.hpp"
 
 #include <gtest/gtest.h>
@@ -539,14 +540,21 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   // The standard error is of block means: positive, and below the rows' own spread.
   EXPECT_GT(r.phi_cv_se_deg, 0.0);
   double var = 0.0;
+  std::vector<double> window_sines;
   for (std::size_t i = 0; i < r.series.rows.size(); ++i) {
     const double e1 = col(r, i, "eps1");
     if (e1 < 0.10 - m || e1 > 0.15 + m) continue;
     const double s1 = col(r, i, "sigma1"), s3 = 0.5 * (col(r, i, "sigma2") + col(r, i, "sigma3"));
     const double phi = std::asin((s1 - s3) / (s1 + s3)) * deg;
     var += (phi - r.phi_cv_deg) * (phi - r.phi_cv_deg) / (n - 1);
+    window_sines.push_back((s1 - s3) / (s1 + s3));
   }
   EXPECT_LT(r.phi_cv_se_deg, std::sqrt(var));
+  // It is the sines' standard error seen through asin (a central difference here):
+  // 1/cos(phi_cv) of it, about 1.15 at 30 deg.
+  const MeanEstimate est = correlated_mean(window_sines);
+  const double h = 1e-7, slope = (std::asin(est.mean + h) - std::asin(est.mean - h)) / (2.0 * h);
+  EXPECT_NEAR(r.phi_cv_se_deg / (slope * est.se * deg), 1.0, 1e-6);
 }
 
 // A dense sample at eps1 = 0.10-0.15 still dilates: the window's dilatancy angle (the

@@ -552,6 +552,29 @@ TEST(CriticalStep, ClosedFormRatiosForEqualSpheres) {
   EXPECT_EQ(all.governing().contact, "pair d_min-d_min");
 }
 
+TEST(CriticalStep, GershgorinBoundOfAGrainCagedBySixContacts) {
+  // One mobile grain touching six fixed ones along the axes: its row of M^-1 K sums
+  // 6 Kn / m translationally and 6 (Ks a^2 + b Ks r^2) / I rotationally, and the
+  // bound is omega^2 = 2 (sum / m + sum / I). The fixed grains have no row.
+  const double r = 0.5e-3, delta = 1e-6, kn = 3e7, ks = 2.7e7;
+  Particles p;
+  p.add(Vec3::Zero(), r, kDensity);
+  for (int a = 0; a < 3; ++a)
+    for (double sgn : {-1.0, 1.0}) p.add(sgn * (2.0 * r - delta) * Vec3::Unit(a), r, kDensity, true);
+  const double m = mass_of(r), inertia = 0.4 * m * r * r, arm = r - 0.5 * delta;
+  {
+    World w(p, {}, open_domain(), law(kn, 0.0), options(safe_dt()));
+    w.refresh();
+    EXPECT_NEAR(stability_limits(w).omega_with_contacts, std::sqrt(2.0 * 6.0 * kn / m), 1e-9 * std::sqrt(kn / m));
+  }
+  World w(p, {}, open_domain(), law(kn, ks, 30.0, 1.0, 0.1), options(safe_dt()));
+  w.refresh();
+  const double w2 = 2.0 * (6.0 * kn / m + 6.0 * (ks * arm * arm + ks * r * r) / inertia);
+  EXPECT_NEAR(stability_limits(w).omega_with_contacts / std::sqrt(w2), 1.0, 1e-9);
+  // The bound is above every isolated contact's frequency.
+  for (const auto& mode : stability_limits(w).modes) EXPECT_GT(std::sqrt(w2), mode.omega) << mode.mode;
+}
+
 TEST(CriticalStep, RefusesATooLargeStepNamingEachMode) {
   struct Case {
     ContactParams cp;
