@@ -1,5 +1,6 @@
 #include "measure.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace demcal::engine {
@@ -113,6 +114,35 @@ double solid_volume(const World& world) {
   for (std::size_t i = 0; i < p.size(); ++i)
     if (!p.fixed[i]) v += sphere_volume(p.r[i]);
   return v;
+}
+
+namespace {
+
+// Volume of the part of a sphere of radius r on the far side of a plane at
+// distance h from its centre (h >= r: none, h <= -r: all).
+double cap_volume(double r, double h) {
+  if (h >= r) return 0.0;
+  if (h <= -r) return sphere_volume(r);
+  const double t = r - h;  // cap height
+  return kPi * t * t * (3.0 * r - t) / 3.0;
+}
+
+}  // namespace
+
+RegionVolumes volumes_in(const Particles& p, const Region& reg) {
+  RegionVolumes out;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double r = p.r[i];
+    const Vec3& x = p.x[i];
+    if (reg.contains(x)) out.centres_inside += sphere_volume(r);
+    double v = sphere_volume(r);
+    for (int a = 0; a < 3; ++a) {
+      v -= cap_volume(r, x[a] - reg.lo[a]);  // part below lo
+      v -= cap_volume(r, reg.hi[a] - x[a]);  // part above hi
+    }
+    out.solid += std::max(0.0, v);
+  }
+  return out;
 }
 
 }  // namespace demcal::engine

@@ -50,4 +50,14 @@ double unbalanced_force_ratio(const World& world);
 // Sum of the volumes of mobile grains.
 double solid_volume(const World& world);
 
+// Grain volume in a region, two ways: the solid actually inside it (each sphere cut
+// by the region's faces; one cut by two faces at once, near an edge, is
+// approximated by subtracting both caps), and the whole volume of the grains whose
+// centres lie inside (what Love-Weber's sum counts).
+struct RegionVolumes {
+  double solid = 0.0;
+  double centres_inside = 0.0;
+};
+RegionVolumes volumes_in(const Particles& p, const Region& region);
+
 }  // namespace demcal::engine

@@ -270,42 +270,14 @@ struct Rig {
   }
 };
 
-// Volume of the part of a sphere of radius r on the far side of a plane at
-// distance h from its centre (h >= r: none, h <= -r: all).
-double cap_volume(double r, double h) {
-  if (h >= r) return 0.0;
-  if (h <= -r) return sphere_volume(r);
-  const double t = r - h;  // cap height
-  return kPi * t * t * (3.0 * r - t) / 3.0;
-}
-
-// Solid volume inside `region` (spheres cut by its faces; a sphere cut by two
-// faces at once, near an edge, is approximated by subtracting both caps) and the
-// full volume of the grains whose centres lie inside.
-void interior_solid(const Particles& p, const Region& reg, double& solid_in, double& vp_centres_in) {
-  solid_in = 0.0;
-  vp_centres_in = 0.0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    const double r = p.r[i];
-    const Vec3& x = p.x[i];
-    if (reg.contains(x)) vp_centres_in += sphere_volume(r);
-    double v = sphere_volume(r);
-    for (int a = 0; a < 3; ++a) {
-      v -= cap_volume(r, x[a] - reg.lo[a]);   // part below lo
-      v -= cap_volume(r, reg.hi[a] - x[a]);   // part above hi
-    }
-    solid_in += std::max(0.0, v);
-  }
-}
-
 // Love-Weber stress in the seed's form (Eq. 2.7): (1 - n) / sum V_p * sum_p sum_c,
 // with n the porosity of the measurement volume itself and the sum over grains
 // whose centres lie in it. Counting grains by their centres is biased where the
 // region's faces cut the layering near the walls; the (1 - n) / sum V_p weight
 // removes that bias. Also returns the porosity of the region.
 Mat3 interior_stress(const World& w, const Region& reg, double& porosity_in) {
-  double solid_in = 0.0, vp_in = 0.0;
-  interior_solid(w.particles(), reg, solid_in, vp_in);
+  const RegionVolumes vol = volumes_in(w.particles(), reg);
+  const double solid_in = vol.solid, vp_in = vol.centres_inside;
   porosity_in = 1.0 - solid_in / reg.volume();
   const Mat3 plain = love_weber_stress(w, reg);  // sum / V
   return vp_in > 0.0 ? Mat3(plain * (solid_in / vp_in)) : plain;

@@ -537,6 +537,11 @@ TEST(TriaxialScene, MetricsAreWhatTheSeriesSay) {
   EXPECT_EQ(r.cv_samples, n);
   EXPECT_EQ(r.eps_v_final, col(r, r.series.rows.size() - 1, "eps_v"));
   EXPECT_EQ(r.porosity_final, col(r, r.series.rows.size() - 1, "porosity"));
+  // The interior reads denser than the box, whose walls order a looser layer, but not
+  // by much (0.391 against 0.425 here; 0.355 against 0.377 at 10,000 grains). Counting
+  // whole grains by their centres instead of the solid inside would read 0.305.
+  EXPECT_LT(r.porosity_interior_initial, r.porosity_initial);
+  EXPECT_GT(r.porosity_interior_initial, r.porosity_initial - 0.06);
   // The standard error is of block means: positive, and below the rows' own spread.
   EXPECT_GT(r.phi_cv_se_deg, 0.0);
   double var = 0.0;

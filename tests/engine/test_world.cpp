@@ -805,6 +805,27 @@ TEST(Measurements, MechanicalCoordinationDropsRattlersAndTheirContacts) {
   }
 }
 
+// The solid inside a measurement volume (what the interior porosity is made of):
+// spheres cut by its faces count their part inside, and Love-Weber's grains are
+// those whose centres are in it. A 10 mm cube holding one whole sphere, one centred
+// on its lower x face (half in), one 0.3 r inside its upper y face (a cap of height
+// 0.7 r out) and one outside.
+TEST(Measurements, SolidInARegionCutsTheSpheresItsFacesCross) {
+  const double r = 1e-3;
+  const Region box{Vec3::Zero(), Vec3::Constant(10e-3)};
+  Particles p;
+  p.add(Vec3(5e-3, 5e-3, 5e-3), r, kDensity);
+  p.add(Vec3(0.0, 5e-3, 5e-3), r, kDensity);
+  p.add(Vec3(5e-3, 10e-3 - 0.3 * r, 5e-3), r, kDensity);
+  p.add(Vec3(20e-3, 5e-3, 5e-3), r, kDensity);
+  const double v = 4.0 / 3.0 * M_PI * r * r * r;
+  const double cap = M_PI * (0.7 * r) * (0.7 * r) * (3.0 * r - 0.7 * r) / 3.0;
+  const RegionVolumes got = volumes_in(p, box);
+  EXPECT_NEAR(got.solid, v + 0.5 * v + (v - cap), 1e-12 * v);
+  EXPECT_NEAR(got.centres_inside, 3.0 * v, 1e-12 * v);
+  EXPECT_GT(got.centres_inside, got.solid);  // the cut parts are counted whole by centre
+}
+
 // Love-Weber over a volume: each grain inside adds its own half of a contact, the
 // branch from its centre to the contact point times the force. For one compressed
 // pair of unequal radii along x, sigma_xx = arm * Kn * delta / V with the arm of the
