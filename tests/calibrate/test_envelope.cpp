@@ -52,6 +52,37 @@ TEST(Envelope, MohrCoulombRecoversKnownFrictionAngleAndCohesion) {
   EXPECT_EQ(z.dof, 10);
 }
 
+TEST(Envelope, CohesionErrorMatchesTheSpreadOfRepeatedFits) {
+  // Low pressures and a large cohesion, where the slope's and the intercept's errors
+  // are strongly correlated and the covariance term of c's error carries the weight:
+  // c = b / (2 sqrt N) moves one way with b and the other with N. Over 2,000 noisy
+  // repeats of the same nine tests, the standard deviation of the fitted c must be
+  // what each fit's c_se says (0.905 and 0.853 kPa here; with the covariance's sign
+  // flipped c_se would read 0.17, without the covariance 0.61).
+  const double phi = 35.0, c = 100.0;
+  const double N = std::pow(std::tan((45 + phi / 2) * M_PI / 180), 2);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  double sum = 0, sum2 = 0, se_sum = 0;
+  const int repeats = 2000;
+  for (int k = 0; k < repeats; ++k) {
+    std::vector<double> s3, s1;
+    for (double p : {25.0, 50.0, 75.0})
+      for (int r = 0; r < 3; ++r) {
+        s3.push_back(p);
+        s1.push_back(N * p + 2 * c * std::sqrt(N) + noise(rng));
+      }
+    const auto e = calibrate::fit_envelope(s3, s1);
+    sum += e.c;
+    sum2 += e.c * e.c;
+    se_sum += e.c_se;
+  }
+  const double mean = sum / repeats, sd = std::sqrt((sum2 - repeats * mean * mean) / (repeats - 1));
+  // The mean of c_se is biased low by about 1/(4 dof) (a sample sd's bias); 10% covers it.
+  EXPECT_NEAR(se_sum / repeats / sd, 1.0, 0.1) << "sd of c " << sd << ", mean c_se " << se_sum / repeats;
+  EXPECT_NEAR(mean, c, 3 * sd / std::sqrt(repeats));
+}
+
 TEST(Envelope, StudentQuantilesForFewDegreesOfFreedom) {
   EXPECT_NEAR(calibrate::t95(1), 12.706, 1e-3);
   EXPECT_NEAR(calibrate::t95(2), 4.303, 1e-3);
