@@ -591,7 +591,9 @@ void World::block_forces(bool kick, std::chrono::steady_clock::time_point& clock
   const bool periodic = dom_.any_periodic();
   const bool frictional = law_.ks > 0.0;
   for (int blk = tid; blk < nt; blk += team) block_pairs(blk, periodic, frictional);
+#ifdef _OPENMP
 #pragma omp barrier
+#endif
   if (tid == 0) t_pairs += seconds_since(clock);
   for (int blk = tid; blk < nt; blk += team) {
     const int lo = row_lo_[blk], hi = row_lo_[blk + 1];
@@ -702,7 +704,9 @@ bool World::drift_and_forces(bool& finite) {
   {
     const int tid = thread_id(), team = team_size();
     for (int blk = tid; blk < nt; blk += team) acc_[blk].stale = drift_block<Periodic>(blk, true);
+#ifdef _OPENMP
 #pragma omp barrier
+#endif
     bool any = false;  // every thread reads the same flags, so all take the same branch
     for (int t = 0; t < nt; ++t) any = any || acc_[t].stale;
     if (tid == 0) {

@@ -30,7 +30,11 @@ struct alignas(64) ThreadAcc {
   long max_overlap_i = -1;
   bool finite = true;        // the thread's grains ended the step with finite x, v, w
   double net_force_sum = 0.0;  // sum of |F| over the thread's free grains before local damping
-  bool stale = false;        // a grain of the thread's block used up half the Verlet skin
+  // A grain of the thread's block used up half the Verlet skin. Every thread reads all
+  // the flags after the barrier that follows the drift while others already write
+  // the fields above: assign fields one by one inside a parallel region, never the
+  // whole struct.
+  bool stale = false;
 };
 // Where a thread's pair loop puts forces and torques: grains below `bound` (its own
 // block) in the grains' arrays, grains at or above it in the thread's buffers.
