@@ -552,6 +552,32 @@ TEST(CriticalStep, ClosedFormRatiosForEqualSpheres) {
   EXPECT_EQ(all.governing().contact, "pair d_min-d_min");
 }
 
+TEST(CriticalStep, UnequalPairRollsAboutTheMeanRadius) {
+  // A d_min-d_max pair (radii 0.5 and 1 mm): in-plane coordinates (x_a, x_b, th_a,
+  // th_b); the tangential spring stretches by x_a - x_b + R_a th_a + R_b th_b, the
+  // rolling spring, Kr = b Ks r^2 with r = (R_a + R_b) / 2, by th_a - th_b. The
+  // fastest in-plane frequency, from M^-1/2 K M^-1/2 written out here, is what the
+  // pair's tangential or rolling limit must give; with r = R_b it would be 23% higher.
+  const double ra = 0.5e-3, rb = 1e-3, ks = 2.7e7, b = 1.0;
+  LimitInputs in;
+  in.law = law(3e7, ks, 30.0, b, 0.1);
+  in.m_min = mass_of(ra);
+  in.r_min = ra;
+  in.m_max = mass_of(rb);
+  in.r_max = rb;
+  const Eigen::Vector4d mass(in.m_min, in.m_max, 0.4 * in.m_min * ra * ra, 0.4 * in.m_max * rb * rb);
+  const Eigen::Vector4d gt(1.0, -1.0, ra, rb), gr(0.0, 0.0, 1.0, -1.0);
+  const double r = 0.5 * (ra + rb);
+  const Eigen::Matrix4d k = ks * gt * gt.transpose() + b * ks * r * r * gr * gr.transpose();
+  const Eigen::Vector4d inv_sqrt_m = mass.cwiseSqrt().cwiseInverse();
+  const Eigen::Matrix4d a = inv_sqrt_m.asDiagonal() * k * inv_sqrt_m.asDiagonal();
+  const double fastest = std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvalues().maxCoeff());
+  double got = 0.0;
+  for (const auto& m : stability_limits(in).modes)
+    if (m.contact == "pair d_min-d_max" && m.mode != "normal") got = std::max(got, m.omega);
+  EXPECT_NEAR(got / fastest, 1.0, 1e-9);
+}
+
 TEST(CriticalStep, GershgorinBoundOfAGrainCagedBySixContacts) {
   // One mobile grain touching six fixed ones along the axes: its row of M^-1 K sums
   // 6 Kn / m translationally and 6 (Ks a^2 + b Ks r^2) / I rotationally, and the
