@@ -397,6 +397,10 @@ StageReport stabilise(Rig& rig, const std::string& name) {
                     " (tolerance " + fmt(cfg.ufr_tolerance) + ")");
 }
 
+// The axial strain of one shear step: how far a series row may lie from its nominal
+// strain, either side (rows are taken within half of it).
+double shear_step_strain(const TriaxialConfig& cfg, const TriaxialResult& res) { return cfg.strain_rate * res.dt; }
+
 }  // namespace
 
 // Whether the critical-state window is at critical state: no volume change (the
@@ -460,12 +464,6 @@ void judge_critical_state(const TriaxialConfig& cfg, const std::vector<double>& 
 // for two rows of 0.001 strain at eps1 = 0.10, the interior's not at all, then the
 // kinetic energy up sevenfold as the chain gave way) sets the maximum of the rows
 // without being the material's peak strength.
-// The axial strain of one shear step: how far a series row may lie from its nominal
-// strain, either side (rows are taken within half of it).
-namespace {
-double shear_step_strain(const TriaxialConfig& cfg, const TriaxialResult& res) { return cfg.strain_rate * res.dt; }
-}  // namespace
-
 void judge_peak(const TriaxialConfig& cfg, TriaxialResult& res) {
   const bool at_end = res.peak_rows_to_end >= 0 && res.peak_rows_to_end < TriaxialResult::kPeakSmoothingRows / 2;
   // A loose sample hardens into its critical state: its largest row is one of the
@@ -878,8 +876,7 @@ void volume_change_from_series(const TriaxialConfig& cfg, TriaxialResult& res) {
       const double de1 = s.rows[j][c_e1] - s.rows[i][c_e1];
       if (de1 < span) continue;
       const double dev = s.rows[j][c_ev] - s.rows[i][c_ev];
-      const double psi = sine_to_deg(dilatancy_sine(dev, de1));
-      if (std::isnan(res.max_dilatancy_deg) || psi > res.max_dilatancy_deg) res.max_dilatancy_deg = psi;
+      res.max_dilatancy_deg = std::fmax(res.max_dilatancy_deg, sine_to_deg(dilatancy_sine(dev, de1)));  // NaN: none yet
       break;
     }
   }
