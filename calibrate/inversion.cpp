@@ -183,6 +183,8 @@ double surrogate_error(const Surrogate& s, double replica_se) {
   return std::sqrt(std::max(loo2 - se2, s.mean_leverage() * se2));
 }
 
+namespace {
+
 // Which correlations the misfit counts. Those of surrogates over different grid
 // points are not (their hat vectors do not pair up), and a set of three or more
 // whose matrix of rho is not positive definite (pairwise estimates from different
@@ -212,25 +214,23 @@ std::vector<PairCorrelation> counted_pairs(const std::vector<Model>& models, Fit
   return counted;
 }
 
-FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
-                 const FitOptions& opt, const std::vector<PairCorrelation>& correlations) {
-  if (models.size() != targets.size() || targets.empty())
-    throw std::invalid_argument("invert: one model per target, at least one target");
-  for (const auto& pc : correlations)
-    if (!(pc.k < pc.l && pc.l < targets.size())) throw std::invalid_argument("invert: a correlation names no pair of targets");
-  if (!(box.theta_hi > box.theta_lo) || !(box.eta_hi > box.eta_lo)) throw std::invalid_argument("invert: empty box");
-  FitResult res;
-  res.box = box;
-  res.method = "surrogate + NLopt GN_DIRECT_L then LN_BOBYQA";
-  const int n = std::max(11, opt.region_n);
-  auto theta_at = [&](int i) { return box.theta_lo + (box.theta_hi - box.theta_lo) * i / (n - 1); };
-  auto eta_at = [&](int j) { return box.eta_lo + (box.eta_hi - box.eta_lo) * j / (n - 1); };
+// The box sampled n x n: cell (i, j) at (theta(i), eta(j)).
+struct FineGrid {
+  Box box;
+  int n;
+  double theta(int i) const { return box.theta_lo + (box.theta_hi - box.theta_lo) * i / (n - 1); }
+  double eta(int j) const { return box.eta_lo + (box.eta_hi - box.eta_lo) * j / (n - 1); }
+  std::size_t cells() const { return static_cast<std::size_t>(n * n); }
+};
 
-  // Each surrogate on the fine grid: its range over the box, and where it is reached.
-  const std::size_t K = targets.size();
-  std::vector<std::vector<double>> val(K, std::vector<double>(static_cast<std::size_t>(n * n)));
-  std::vector<double> values(K);
-  for (std::size_t k = 0; k < K; ++k) {
+// Each target's surrogate over the box (its range, where that is reached) and its
+// sigma, into res.targets. Returns the surrogates' values on the fine grid,
+// val[k][j * n + i].
+std::vector<std::vector<double>> describe_targets(const std::vector<Model>& models, const std::vector<Target>& targets,
+                                                  const FineGrid& grid, FitResult& res) {
+  const int n = grid.n;
+  std::vector<std::vector<double>> val(targets.size(), std::vector<double>(grid.cells()));
+  for (std::size_t k = 0; k < targets.size(); ++k) {
     TargetFit t;
     t.metric = targets[k].metric;
     t.job = models[k].job;
@@ -241,10 +241,10 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     t.hi = -INFINITY;
     for (int j = 0; j < n; ++j)
       for (int i = 0; i < n; ++i) {
-        const double v = models[k].surrogate(theta_at(i), eta_at(j));
+        const double v = models[k].surrogate(grid.theta(i), grid.eta(j));
         val[k][static_cast<std::size_t>(j * n + i)] = v;
-        if (v < t.lo) t.lo = v, t.theta_at_lo = theta_at(i), t.eta_at_lo = eta_at(j);
-        if (v > t.hi) t.hi = v, t.theta_at_hi = theta_at(i), t.eta_at_hi = eta_at(j);
+        if (v < t.lo) t.lo = v, t.theta_at_lo = grid.theta(i), t.eta_at_lo = grid.eta(j);
+        if (v > t.hi) t.hi = v, t.theta_at_hi = grid.theta(i), t.eta_at_hi = grid.eta(j);
       }
     t.sigma_given = std::isfinite(targets[k].sigma);
     t.lab_sigma = t.sigma_given ? targets[k].sigma : 0.0;
@@ -254,11 +254,16 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     // so a perfect fit of noise-free data cannot make the misfit infinitely sharp.
     t.sigma = std::hypot(t.lab_sigma, t.surrogate_sigma);
     t.sigma = std::max({t.sigma, 1e-3 * (t.hi - t.lo), 1e-9});
-    values[k] = t.target;
     res.targets.push_back(t);
   }
+  return val;
+}
 
-  // A target beyond the surrogate's range is unreachable whatever the optimiser says.
+// A target beyond the surrogate's range by more than reach_sigmas is unreachable
+// whatever the optimiser says. Beyond it but within reach of its sigma, the fit goes
+// on, and its answer is only where the grid's values end (a repose target 3.7 above
+// the grid's highest angle, inside 2 sigma, read as matched): a warning.
+void judge_reach(FitResult& res, const Box& box, const FitOptions& opt) {
   for (const auto& t : res.targets) {
     if (t.target > t.hi + opt.reach_sigmas * t.sigma)
       res.unreachable.push_back(t.metric + " = " + g(t.target) + " is above anything the grid reaches: at most " + g(t.hi) +
@@ -269,9 +274,6 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                                 " (at " + where(box, t.theta_at_lo, t.eta_at_lo) + "; sigma " + g(t.sigma, 2) +
                                 "); extend the grid beyond that bound");
   }
-  // Beyond the grid's values but within reach of its sigma: the fit goes on, and its
-  // answer is only where the grid's values end (a repose target 3.7 above the grid's
-  // highest angle, inside 2 sigma, read as matched).
   for (const auto& t : res.targets) {
     const bool above = t.target > t.hi, below = t.target < t.lo;
     if ((above || below) && std::abs(t.target - (above ? t.hi : t.lo)) <= opt.reach_sigmas * t.sigma)
@@ -283,22 +285,22 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
                              "): the answer lies where the grid's values end, not where the target is met; extend "
                              "the grid beyond that bound");
   }
+}
 
-  res.correlations = correlations;
-  Misfit misfit{&models, values, {}, {}, counted_pairs(models, res)};
-  for (const auto& t : res.targets) misfit.sigma.push_back(t.sigma), misfit.noise.push_back(t.noise_sigma);
-  const Objective obj{&misfit, &box, {}};
-  std::vector<double> mis(static_cast<std::size_t>(n * n)), pred(K);
-  std::size_t best_cell = 0;
+// The misfit at every cell of the fine grid, from the surrogates' values there.
+std::vector<double> misfit_on_grid(const Misfit& misfit, const std::vector<std::vector<double>>& val, const FineGrid& grid) {
+  std::vector<double> mis(grid.cells()), pred(val.size());
   for (std::size_t c = 0; c < mis.size(); ++c) {
-    for (std::size_t k = 0; k < K; ++k) pred[k] = val[k][c];
-    mis[c] = misfit(theta_at(static_cast<int>(c % n)), eta_at(static_cast<int>(c / n)), pred.data());
-    if (mis[c] < mis[best_cell]) best_cell = c;
+    for (std::size_t k = 0; k < val.size(); ++k) pred[k] = val[k][c];
+    mis[c] = misfit(grid.theta(static_cast<int>(c % grid.n)), grid.eta(static_cast<int>(c / grid.n)), pred.data());
   }
+  return mis;
+}
 
-  // Global search over the unit square, then a local polish from the best start.
-  std::vector<double> x = {static_cast<double>(best_cell % n) / (n - 1), static_cast<double>(best_cell / n) / (n - 1)};
-  double fbest = mis[best_cell];
+// Global search over the unit square, then a local polish from the best start. `x`
+// comes in as the best grid cell and `f` as the misfit there; each optimiser's point
+// replaces them only where it is no worse.
+void minimise(const Objective& obj, int n, const FitOptions& opt, std::vector<double>& x, double& f) {
   try {
     nlopt::opt global(nlopt::GN_DIRECT_L, 2);
     global.set_lower_bounds({0.0, 0.0});
@@ -308,7 +310,7 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     std::vector<double> xg = {0.5, 0.5};
     double fg = 0;
     global.optimize(xg, fg);
-    if (fg < fbest) fbest = fg, x = xg;
+    if (fg < f) f = fg, x = xg;
   } catch (const std::exception&) {
     // DIRECT stopping on its own limits is not a failure; the grid start stands.
   }
@@ -321,22 +323,21 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
     local.set_maxeval(2000);
     local.set_initial_step(std::vector<double>{0.5 / (n - 1), 0.5 / (n - 1)});
     std::vector<double> xl = x;
-    double fl = fbest;
+    double fl = f;
     local.optimize(xl, fl);
-    if (fl <= fbest) fbest = fl, x = xl;
+    if (fl <= f) f = fl, x = xl;
   } catch (const std::exception&) {
   }
-  res.theta = box.theta_lo + x[0] * (box.theta_hi - box.theta_lo);
-  res.eta = box.eta_lo + x[1] * (box.eta_hi - box.eta_lo);
-  res.misfit = fbest;
-  for (std::size_t k = 0; k < K; ++k) {
-    res.targets[k].predicted = models[k].surrogate(res.theta, res.eta);
-    res.targets[k].residual = res.targets[k].predicted - res.targets[k].target;
-  }
-  for (auto& pc : res.correlations)
-    if (pc.c.estimated && !misfit.pairs.empty()) pc.at_best = misfit.effective_rho(pc, res.theta, res.eta);
+}
 
-  // The region: every fine-grid cell within delta of the minimum.
+// The region: every fine-grid cell within delta of the minimum (at least the best
+// point's cell), and each parameter's own interval: from the best point, every cell
+// within delta1 (fewer than the region's, whose threshold is higher). Both extend to
+// the cells' edges at the grid's resolution.
+void trace_region(FitResult& res, const std::vector<double>& mis, const FineGrid& grid, const std::vector<double>& x,
+                  const FitOptions& opt) {
+  const int n = grid.n;
+  const Box& box = grid.box;
   Region& R = res.region;
   R.n = n;
   R.mask.assign(static_cast<std::size_t>(n), std::string(static_cast<std::size_t>(n), '0'));
@@ -345,32 +346,29 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
   auto include = [&](int i, int j) {
     R.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] = '1';
     ++R.cells;
-    R.theta_lo = std::min(R.theta_lo, theta_at(i));
-    R.theta_hi = std::max(R.theta_hi, theta_at(i));
-    R.eta_lo = std::min(R.eta_lo, eta_at(j));
-    R.eta_hi = std::max(R.eta_hi, eta_at(j));
+    R.theta_lo = std::min(R.theta_lo, grid.theta(i));
+    R.theta_hi = std::max(R.theta_hi, grid.theta(i));
+    R.eta_lo = std::min(R.eta_lo, grid.eta(j));
+    R.eta_hi = std::max(R.eta_hi, grid.eta(j));
     if (i == 0) R.at_theta_lo = true;
     if (i == n - 1) R.at_theta_hi = true;
     if (j == 0) R.at_eta_lo = true;
     if (j == n - 1) R.at_eta_hi = true;
   };
-  // Each parameter's own interval starts at the best point and takes in every cell
-  // within delta1 (fewer than the region's, whose threshold is higher).
   res.theta_lo1 = res.theta_hi1 = res.theta;
   res.eta_lo1 = res.eta_hi1 = res.eta;
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
       const double m = mis[static_cast<std::size_t>(j * n + i)];
-      if (m <= fbest + opt.delta) include(i, j);
-      if (m <= fbest + opt.delta1) {
-        res.theta_lo1 = std::min(res.theta_lo1, theta_at(i));
-        res.theta_hi1 = std::max(res.theta_hi1, theta_at(i));
-        res.eta_lo1 = std::min(res.eta_lo1, eta_at(j));
-        res.eta_hi1 = std::max(res.eta_hi1, eta_at(j));
+      if (m <= res.misfit + opt.delta) include(i, j);
+      if (m <= res.misfit + opt.delta1) {
+        res.theta_lo1 = std::min(res.theta_lo1, grid.theta(i));
+        res.theta_hi1 = std::max(res.theta_hi1, grid.theta(i));
+        res.eta_lo1 = std::min(res.eta_lo1, grid.eta(j));
+        res.eta_hi1 = std::max(res.eta_hi1, grid.eta(j));
       }
     }
   if (R.cells == 0) include(static_cast<int>(std::lround(x[0] * (n - 1))), static_cast<int>(std::lround(x[1] * (n - 1))));
-  // Extents to the cell edges at the grid resolution (the region is at least one cell).
   const double hc = 0.5 * (box.theta_hi - box.theta_lo) / (n - 1), he = 0.5 * (box.eta_hi - box.eta_lo) / (n - 1);
   auto to_edges = [](double& lo, double& hi, double half, double box_lo, double box_hi) {
     lo = std::max(box_lo, lo - half);
@@ -380,12 +378,16 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
   to_edges(R.eta_lo, R.eta_hi, he, box.eta_lo, box.eta_hi);
   to_edges(res.theta_lo1, res.theta_hi1, hc, box.theta_lo, box.theta_hi);
   to_edges(res.eta_lo1, res.eta_hi1, he, box.eta_lo, box.eta_hi);
+}
 
-  // A large residual at the best point: on a bound, the targets lie beyond it; with
-  // no more targets than unknowns, no point of the grid matches them together.
-  // (With more targets than unknowns a mismatch is reported as a warning below.)
+// A large residual at the best point (x, in the unit square): on a bound, the
+// targets lie beyond it; with no more targets than unknowns, no point of the grid
+// matches them together. (With more targets than unknowns a mismatch is reported as
+// a warning by warn_identifiability.) Sets res.ok.
+void judge_residuals(FitResult& res, const std::vector<double>& x, const FitOptions& opt) {
+  const Box& box = res.box;
   const bool on_bound = x[0] < 1e-3 || x[0] > 1 - 1e-3 || x[1] < 1e-3 || x[1] > 1 - 1e-3;
-  if (res.unreachable.empty() && (on_bound || K <= 2)) {
+  if (res.unreachable.empty() && (on_bound || res.targets.size() <= 2)) {
     for (const auto& t : res.targets)
       if (std::abs(t.residual) > opt.reach_sigmas * t.sigma)
         res.unreachable.push_back(
@@ -397,56 +399,104 @@ FitResult invert(const std::vector<Model>& models, const std::vector<Target>& ta
             " sigma)" + (on_bound ? ": the targets lie beyond that bound; extend the grid" : ""));
   }
   res.ok = res.unreachable.empty();
+}
 
-  // Identifiability.
+// Warnings when the targets do not pin (theta, eta) down: too few targets, a region
+// that fills or touches the grid's range or is elongated, a target flat along an axis
+// near the answer, or more targets than unknowns that no point matches together.
+void warn_identifiability(FitResult& res, const std::vector<Model>& models) {
+  const Box& box = res.box;
+  const Region& R = res.region;
+  const std::size_t K = res.targets.size();
   const double wt = box.theta_hi - box.theta_lo, we = box.eta_hi - box.eta_lo;
   const double ft = (R.theta_hi - R.theta_lo) / wt, fe = (R.eta_hi - R.eta_lo) / we;
   if (K < 2)
     res.warnings.push_back("one target for two unknowns (theta, eta): the targets are matched along a curve, not at a point; "
                            "the best point is one of many (add a second target, e.g. phi_peak with phi_cv)");
-  if (res.ok) {
-    if (R.at_theta_lo && R.at_theta_hi)
-      res.warnings.push_back("theta is not pinned down: the 95% region spans the whole theta range of the grid [" + g(box.theta_lo) +
-                             ", " + g(box.theta_hi) + "] deg");
-    else if (R.at_theta_lo || R.at_theta_hi)
-      res.warnings.push_back("the 95% region reaches the theta " + std::string(R.at_theta_lo ? "lower" : "upper") + " bound (" +
-                             g(R.at_theta_lo ? box.theta_lo : box.theta_hi) + " deg): the grid cuts it off; extend the grid there");
-    if (R.at_eta_lo && R.at_eta_hi)
-      res.warnings.push_back("eta is not pinned down: the 95% region spans the whole eta range of the grid [" + g(box.eta_lo) + ", " +
-                             g(box.eta_hi) + "]");
-    else if (R.at_eta_lo || R.at_eta_hi)
-      res.warnings.push_back("the 95% region reaches the eta " + std::string(R.at_eta_lo ? "lower" : "upper") + " bound (" +
-                             g(R.at_eta_lo ? box.eta_lo : box.eta_hi) + "): the grid cuts it off; extend the grid there");
-    if (std::max(ft, fe) > 0.3 && std::max(ft, fe) > 4 * std::min(ft, fe))
-      res.warnings.push_back(std::string("the 95% region is elongated along ") + (ft > fe ? "theta" : "eta") + " (" +
-                             percent(ft) + " of the theta range, " + percent(fe) + " of the eta range): " +
-                             (ft > fe ? "theta" : "eta") + " is poorly determined by these targets");
-    // A target that barely changes across an axis near the answer cannot pin that axis.
-    for (std::size_t k = 0; k < K; ++k) {
-      const auto& s = models[k].surrogate;
-      const double ht = 0.01 * wt, he2 = 0.01 * we;
-      const double t0 = std::clamp(res.theta, box.theta_lo + ht, box.theta_hi - ht);
-      const double e0 = std::clamp(res.eta, box.eta_lo + he2, box.eta_hi - he2);
-      const double dth = (s(t0 + ht, e0) - s(t0 - ht, e0)) / (2 * ht) * wt * 0.25;
-      const double det = (s(t0, e0 + he2) - s(t0, e0 - he2)) / (2 * he2) * we * 0.25;
-      if (std::abs(dth) < res.targets[k].sigma)
-        res.warnings.push_back(res.targets[k].metric + " is nearly flat in theta near the best point (changes by " + g(dth, 2) + unit_suffix(res.targets[k].metric) +
-                               " over a quarter of the theta range, less than its sigma " + g(res.targets[k].sigma, 2) +
-                               "): it cannot pin theta there");
-      if (std::abs(det) < res.targets[k].sigma)
-        res.warnings.push_back(res.targets[k].metric + " is nearly flat in eta near the best point (changes by " + g(det, 2) + unit_suffix(res.targets[k].metric) +
-                               " over a quarter of the eta range, less than its sigma " + g(res.targets[k].sigma, 2) +
-                               "): it cannot pin eta there");
-    }
-    // With more targets than unknowns the misfit at the best point is chi-square with
-    // K - 2 dof; with two or fewer it is zero wherever the targets are reachable.
-    const int dof = static_cast<int>(K) - 2;
-    const double limit = dof >= 1 ? chi2_upper_quantile(dof, 0.01) : INFINITY;
-    if (res.misfit > limit)
-      res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) +
-                             " at the best point (above the 99% chi-square level " + g(limit, 3) + " for " +
-                             std::to_string(dof) + " dof); no (theta, eta) in the grid reproduces all of them");
+  if (!res.ok) return;
+  if (R.at_theta_lo && R.at_theta_hi)
+    res.warnings.push_back("theta is not pinned down: the 95% region spans the whole theta range of the grid [" + g(box.theta_lo) +
+                           ", " + g(box.theta_hi) + "] deg");
+  else if (R.at_theta_lo || R.at_theta_hi)
+    res.warnings.push_back("the 95% region reaches the theta " + std::string(R.at_theta_lo ? "lower" : "upper") + " bound (" +
+                           g(R.at_theta_lo ? box.theta_lo : box.theta_hi) + " deg): the grid cuts it off; extend the grid there");
+  if (R.at_eta_lo && R.at_eta_hi)
+    res.warnings.push_back("eta is not pinned down: the 95% region spans the whole eta range of the grid [" + g(box.eta_lo) + ", " +
+                           g(box.eta_hi) + "]");
+  else if (R.at_eta_lo || R.at_eta_hi)
+    res.warnings.push_back("the 95% region reaches the eta " + std::string(R.at_eta_lo ? "lower" : "upper") + " bound (" +
+                           g(R.at_eta_lo ? box.eta_lo : box.eta_hi) + "): the grid cuts it off; extend the grid there");
+  if (std::max(ft, fe) > 0.3 && std::max(ft, fe) > 4 * std::min(ft, fe))
+    res.warnings.push_back(std::string("the 95% region is elongated along ") + (ft > fe ? "theta" : "eta") + " (" +
+                           percent(ft) + " of the theta range, " + percent(fe) + " of the eta range): " +
+                           (ft > fe ? "theta" : "eta") + " is poorly determined by these targets");
+  // A target that barely changes across an axis near the answer cannot pin that axis.
+  for (std::size_t k = 0; k < K; ++k) {
+    const auto& s = models[k].surrogate;
+    const double ht = 0.01 * wt, he2 = 0.01 * we;
+    const double t0 = std::clamp(res.theta, box.theta_lo + ht, box.theta_hi - ht);
+    const double e0 = std::clamp(res.eta, box.eta_lo + he2, box.eta_hi - he2);
+    const double dth = (s(t0 + ht, e0) - s(t0 - ht, e0)) / (2 * ht) * wt * 0.25;
+    const double det = (s(t0, e0 + he2) - s(t0, e0 - he2)) / (2 * he2) * we * 0.25;
+    if (std::abs(dth) < res.targets[k].sigma)
+      res.warnings.push_back(res.targets[k].metric + " is nearly flat in theta near the best point (changes by " + g(dth, 2) + unit_suffix(res.targets[k].metric) +
+                             " over a quarter of the theta range, less than its sigma " + g(res.targets[k].sigma, 2) +
+                             "): it cannot pin theta there");
+    if (std::abs(det) < res.targets[k].sigma)
+      res.warnings.push_back(res.targets[k].metric + " is nearly flat in eta near the best point (changes by " + g(det, 2) + unit_suffix(res.targets[k].metric) +
+                             " over a quarter of the eta range, less than its sigma " + g(res.targets[k].sigma, 2) +
+                             "): it cannot pin eta there");
   }
+  // With more targets than unknowns the misfit at the best point is chi-square with
+  // K - 2 dof; with two or fewer it is zero wherever the targets are reachable.
+  const int dof = static_cast<int>(K) - 2;
+  const double limit = dof >= 1 ? chi2_upper_quantile(dof, 0.01) : INFINITY;
+  if (res.misfit > limit)
+    res.warnings.push_back("the targets are not matched together: misfit " + g(res.misfit, 3) +
+                           " at the best point (above the 99% chi-square level " + g(limit, 3) + " for " +
+                           std::to_string(dof) + " dof); no (theta, eta) in the grid reproduces all of them");
+}
+
+}  // namespace
+
+FitResult invert(const std::vector<Model>& models, const std::vector<Target>& targets, const Box& box,
+                 const FitOptions& opt, const std::vector<PairCorrelation>& correlations) {
+  if (models.size() != targets.size() || targets.empty())
+    throw std::invalid_argument("invert: one model per target, at least one target");
+  for (const auto& pc : correlations)
+    if (!(pc.k < pc.l && pc.l < targets.size())) throw std::invalid_argument("invert: a correlation names no pair of targets");
+  if (!(box.theta_hi > box.theta_lo) || !(box.eta_hi > box.eta_lo)) throw std::invalid_argument("invert: empty box");
+  FitResult res;
+  res.box = box;
+  res.method = "surrogate + NLopt GN_DIRECT_L then LN_BOBYQA";
+  const FineGrid grid{box, std::max(11, opt.region_n)};
+  const int n = grid.n;
+  const std::vector<std::vector<double>> val = describe_targets(models, targets, grid, res);
+  judge_reach(res, box, opt);
+
+  res.correlations = correlations;
+  Misfit misfit{&models, {}, {}, {}, counted_pairs(models, res)};
+  for (const auto& t : res.targets)
+    misfit.values.push_back(t.target), misfit.sigma.push_back(t.sigma), misfit.noise.push_back(t.noise_sigma);
+  const Objective obj{&misfit, &box, {}};
+  const std::vector<double> mis = misfit_on_grid(misfit, val, grid);
+  const auto best_cell = static_cast<std::size_t>(std::min_element(mis.begin(), mis.end()) - mis.begin());
+  std::vector<double> x = {static_cast<double>(best_cell % n) / (n - 1), static_cast<double>(best_cell / n) / (n - 1)};
+  double fbest = mis[best_cell];
+  minimise(obj, n, opt, x, fbest);
+
+  res.theta = box.theta_lo + x[0] * (box.theta_hi - box.theta_lo);
+  res.eta = box.eta_lo + x[1] * (box.eta_hi - box.eta_lo);
+  res.misfit = fbest;
+  for (std::size_t k = 0; k < res.targets.size(); ++k) {
+    res.targets[k].predicted = models[k].surrogate(res.theta, res.eta);
+    res.targets[k].residual = res.targets[k].predicted - res.targets[k].target;
+  }
+  for (auto& pc : res.correlations)
+    if (pc.c.estimated && !misfit.pairs.empty()) pc.at_best = misfit.effective_rho(pc, res.theta, res.eta);
+  trace_region(res, mis, grid, x, opt);
+  judge_residuals(res, x, opt);
+  warn_identifiability(res, models);
   return res;
 }
 
