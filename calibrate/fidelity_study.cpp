@@ -377,6 +377,8 @@ std::vector<std::string> fidelity_knob_names(const std::string& name) {
   return out;
 }
 
+namespace {
+
 // The jobs of each selected knob, parsed (validated). A grid path such as
 // grid.dt_factor[3] is the study's, not the user's: an error names the knob, and
 // --reference when the user chose that value.
@@ -402,29 +404,16 @@ std::vector<std::vector<Job>> knob_job_sets(const FidelityDef& d, const std::vec
   return jobs;
 }
 
-void check_fidelity_options(const std::string& name, const StudyOptions& o) {
-  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
-  knob_job_sets(d, selected_knobs(d, o), o, name, effective_replicas(o));
+double mean_of(const std::vector<double>& x) {
+  double t = 0;
+  for (double e : x) t += e;
+  return x.empty() ? NAN : t / static_cast<double>(x.size());
 }
 
-FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, const StudyOptions& o) {
-  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
-  const std::vector<KnobDef> knobs = selected_knobs(d, o);
-  FidelityStudy s;
-  std::set<std::int64_t> counted;  // tasks counted in s.finished and s.warned
-  s.name = name;
-  s.stem = name + (o.smoothed_peak ? "-smoothed-peak" : "");
-  s.smoothed_peak = o.smoothed_peak;
-  s.scene = d.scene;
-  s.metrics = d.metrics;
-  s.tolerance = o.tolerance > 0 ? o.tolerance : 2.0;
-  s.replicas = effective_replicas(o);
-  for (const auto& k : d.knobs) {
-    s.baseline += (s.baseline.empty() ? "" : ", ") + k.name + " " + label_of(d.base.at(k.params.front()).get<double>());
-  }
-
-  // Every job is validated before any runs: an invalid one writes nothing.
-  const std::vector<std::vector<Job>> jobs = knob_job_sets(d, knobs, o, name, s.replicas);
+// Writes every job's file (all of them valid before any runs: an invalid one writes
+// nothing), then runs the jobs: s.job_files, s.tasks, s.ran and s.reused.
+void run_knob_jobs(db::Store& store, const std::vector<std::vector<Job>>& jobs, const StudyOptions& o,
+                   FidelityStudy& s) {
   const fs::path dir = o.out_dir;
   fs::create_directories(dir / "jobs");
   std::set<std::string> keys;
@@ -452,9 +441,222 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
       if (sum.unfinished > 0) throw std::runtime_error("study: " + std::to_string(sum.unfinished) + " tasks of job " + j.name + " unfinished");
       s.ran += sum.ran;
     }
-
   s.reused = s.tasks - s.ran;
+}
+
+// One setting of knob `k` over its replicas (the rows whose first parameter is
+// `value`): the metrics' mean and sd, wall time and work of the finished ones; the
+// failed ones and the peaks on a spike listed in the point and in the study. The
+// baseline's tasks stand in every knob's table: `counted` counts each task once in
+// s.finished and s.warned.
+FidelityPoint measure_setting(const FidelityDef& d, const KnobDef& kd, const std::vector<ResultRow>& rows, double value,
+                              FidelityStudy& s, std::set<std::int64_t>& counted) {
   const std::size_t nm = d.metrics.size();
+  FidelityPoint p;
+  p.value = value;
+  p.label = label_of(p.value);
+  p.baseline = same_value(p.value, d.base.at(kd.params.front()).get<double>());
+  p.reference = same_value(p.value, kd.reference);
+  std::vector<std::vector<double>> vals(nm);
+  std::vector<double> ok_wall, failed_wall, ok_work;
+  for (const auto& r : rows) {
+    if (!same_value(r.params.at(kd.params.front()).get<double>(), p.value)) continue;
+    ++p.replicas;
+    const double wall = std::isfinite(metric(r, "wall_s")) ? metric(r, "wall_s") : r.task.wall_s;
+    std::string why;
+    if (r.task.status != "done") {
+      why = r.task.error.empty() ? r.task.status : r.task.error;
+    } else {
+      for (const auto& m : d.metrics)
+        if (!std::isfinite(metric(r, m))) why += (why.empty() ? "done but no " : ", ") + m;
+    }
+    const std::string seed = "seed " + r.params.at("seed").dump();
+    if (!why.empty()) {
+      ++p.failed;
+      p.failures.push_back(seed + ": " + why.substr(0, 240));
+      s.failures.push_back(kd.name + "=" + p.label + " " + seed + ": " + why.substr(0, 240));
+      if (std::isfinite(wall)) failed_wall.push_back(wall);
+      continue;
+    }
+    if (counted.insert(r.task.id).second) {
+      ++s.finished;
+      if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
+        ++s.warned;
+        s.not_critical += says_not_at_critical_state(w);
+        s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
+      }
+    }
+    // Marked and listed: one spike can set a setting's mean, spread and verdict
+    // (never for repose, whose results hold no peak).
+    if (peak_on_a_spike(r.metrics)) {
+      const std::string spike = seed + ": phi_peak " + fmt(metric(r, "phi_peak_deg"), 4) +
+                                " deg, the running mean's peak " + fmt(metric(r, "phi_peak_smoothed_deg"), 4) + " deg";
+      p.spikes.push_back(spike);
+      s.spikes.push_back(kd.name + "=" + p.label + " " + spike);
+    }
+    ok_wall.push_back(wall);
+    ok_work.push_back(metric(r, "particles") * metric(r, "steps"));
+    for (std::size_t m = 0; m < nm; ++m) vals[m].push_back(metric(r, d.metrics[m]));
+  }
+  p.wall_s = ok_wall.empty() ? mean_of(failed_wall) : mean_of(ok_wall);
+  p.work = mean_of(ok_work);
+  p.mean.assign(nm, NAN);
+  p.sd.assign(nm, NAN);
+  p.error.assign(nm, NAN);
+  for (std::size_t m = 0; m < nm; ++m) {
+    if (vals[m].empty()) continue;
+    p.mean[m] = mean_of(vals[m]);
+    double ss = 0;
+    for (double e : vals[m]) ss += (e - p.mean[m]) * (e - p.mean[m]);
+    p.sd[m] = vals[m].size() > 1 ? std::sqrt(ss / static_cast<double>(vals[m].size() - 1)) : 0.0;
+  }
+  return p;
+}
+
+// Every setting's error against the reference, the Pareto front, and the knob's
+// recommendation: the cheapest setting (fewest particle-steps) within the tolerance.
+void judge_knob(FidelityKnob& k, const KnobDef& kd, const FidelityDef& d, const FidelityStudy& s, bool smoothed_peak) {
+  const std::size_t nm = d.metrics.size();
+  const auto ref = std::find_if(k.points.begin(), k.points.end(), [](const FidelityPoint& p) { return p.reference; });
+  const bool have_ref = ref != k.points.end() && std::isfinite(ref->mean[0]);
+  if (have_ref) {
+    for (auto& p : k.points) {
+      double score = 0;
+      for (std::size_t m = 0; m < nm; ++m) {
+        p.error[m] = std::abs(p.mean[m] - ref->mean[m]);
+        score = std::max(score, p.error[m] + p.sd[m]);
+      }
+      p.score = std::isfinite(p.mean[0]) ? score : NAN;
+      p.pass = p.failed == 0 && std::isfinite(p.score) && p.score <= s.tolerance;
+    }
+  }
+  mark_fidelity_pareto(k.points);
+  FidelityPoint* best = nullptr;
+  for (auto& p : k.points)
+    if (p.pass && (!best || p.work < best->work)) best = &p;
+  std::ostringstream rec;
+  rec << k.name << ": ";
+  const std::string ref_label = ref != k.points.end() ? ref->label : label_of(kd.reference);
+  // The reference alone finished: nothing was measured against it.
+  const bool alone = have_ref && std::none_of(k.points.begin(), k.points.end(), [](const FidelityPoint& p) {
+    return !p.reference && std::isfinite(p.mean[0]);
+  });
+  k.judged = have_ref && !alone;
+  if (alone) {
+    rec << "no recommendation: every setting but the reference " << ref_label
+        << " failed in every replica, so nothing was compared with it (the failed tasks are listed below)";
+  } else if (!have_ref) {
+    rec << "no recommendation: the reference " << ref_label << " failed in every replica";
+  } else if (!best) {
+    rec << "no setting within " << fmt(s.tolerance) << " deg of the reference " << ref_label
+        << " (error + replica sd, every replica ok)";
+  } else {
+    best->recommended = true;
+    k.recommended = best->value;
+    // One replica a setting measures no spread: its sd reads 0, and the error alone
+    // (one packing's) is judged. Said, not shown as "+/- 0".
+    const bool spread = s.replicas > 1;
+    rec << "recommended " << best->label << " (";
+    for (std::size_t m = 0; m < nm; ++m)
+      rec << (m ? ", " : "") << short_metric(d.metrics[m]) << " error " << fmt(best->error[m], 2)
+          << (spread ? " +/- " + fmt(best->sd[m], 2) : std::string()) << " deg";
+    rec << "; " << std::llround(best->work / 1e6) << " million particle-steps, " << fmt(best->wall_s, 4)
+        << " s, against " << std::llround(ref->work / 1e6) << " million and " << fmt(ref->wall_s, 4)
+        << " s for the reference " << ref_label
+        << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance) << " deg"
+        << (spread ? " including the replica spread"
+                   : " of one replica, whose spread is not measured: more replicas (--replicas 3) may not confirm it");
+  }
+  std::string spiked;
+  for (const auto& p : k.points)
+    if (!p.spikes.empty())
+      spiked += (spiked.empty() ? "" : ", ") + p.label + (p.reference ? " (the reference)" : "") + ": " +
+                std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
+  if (!spiked.empty())
+    rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
+        << (smoothed_peak ? " (judged here by the running mean's peak, " + running_mean_vs_spike() + ")"
+                          : " (--peak smoothed judges the running mean's peak instead)");
+  k.recommendation = rec.str();
+}
+
+// The study's one-line recommendation, and the note on warned tasks.
+void summarise(FidelityStudy& s, const db::Store& store, bool smoothed_peak) {
+  std::ostringstream summary;
+  summary << "recommended settings (" << s.name << (smoothed_peak ? ", phi_peak by its running mean" : "")
+          << ", one knob at a time around the baseline, tolerance " << fmt(s.tolerance) << " deg"
+          << (s.replicas > 1 ? "" : ", one replica a setting: the spread not measured") << "):";
+  bool any = false;
+  for (const auto& k : s.knobs) {
+    summary << (any ? ", " : " ") << k.name << " " << (std::isfinite(k.recommended) ? label_of(k.recommended) : "none");
+    any = true;
+  }
+  s.recommendation = summary.str();
+  if (s.warned == 0) return;
+  std::ostringstream w;
+  w << "warnings: " << s.warned << " of the " << s.finished << " finished tasks carry warnings (";
+  if (s.not_critical > 0) w << s.not_critical << " not at critical state, ";
+  if (s.not_quasi_static > 0) w << s.not_quasi_static << " not quasi-static, ";
+  std::set<std::string> names;
+  for (const auto& k : s.knobs) names.insert(k.jobs.begin(), k.jobs.end());
+  std::string list;
+  for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+  w << "demcal query --db " << store.path() << " --job JOB lists them, JOB one of " << list
+    << "): the errors above compare "
+    << "what those runs gave, and a setting judged against a warned reference inherits its warning";
+  s.warnings_note = w.str();
+}
+
+// The charts, the CSV and the recommendation file, named by s.stem.
+void write_study_files(FidelityStudy& s, const fs::path& dir) {
+  for (auto& k : s.knobs) {
+    write_fidelity_chart(s, k, dir);
+    s.files.push_back(k.chart);
+  }
+  const fs::path csv = dir / (s.stem + ".csv");
+  write_fidelity_csv(s, csv);
+  s.files.push_back(csv.string());
+  const fs::path rec = dir / (s.stem + "_recommendation.txt");
+  WholeTextFile r(rec);
+  for (const auto& k : s.knobs) r << k.recommendation << "\n";
+  r << s.recommendation << "\n";
+  if (!s.warnings_note.empty()) r << s.warnings_note << "\n";
+  if (!s.failures.empty()) {
+    r << "failed tasks:\n";
+    for (const auto& f : s.failures) r << "  " << f << "\n";
+  }
+  if (!s.spikes.empty()) {
+    r << spike_heading() << ":\n";
+    for (const auto& f : s.spikes) r << "  " << f << "\n";
+  }
+  r.commit();
+  s.files.push_back(rec.string());
+}
+
+}  // namespace
+
+void check_fidelity_options(const std::string& name, const StudyOptions& o) {
+  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
+  knob_job_sets(d, selected_knobs(d, o), o, name, effective_replicas(o));
+}
+
+FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, const StudyOptions& o) {
+  const FidelityDef d = fidelity_def(name, o.quick, o.smoothed_peak);
+  const std::vector<KnobDef> knobs = selected_knobs(d, o);
+  FidelityStudy s;
+  s.name = name;
+  s.stem = name + (o.smoothed_peak ? "-smoothed-peak" : "");
+  s.smoothed_peak = o.smoothed_peak;
+  s.scene = d.scene;
+  s.metrics = d.metrics;
+  s.tolerance = o.tolerance > 0 ? o.tolerance : 2.0;
+  s.replicas = effective_replicas(o);
+  for (const auto& k : d.knobs) {
+    s.baseline += (s.baseline.empty() ? "" : ", ") + k.name + " " + label_of(d.base.at(k.params.front()).get<double>());
+  }
+  const std::vector<std::vector<Job>> jobs = knob_job_sets(d, knobs, o, name, s.replicas);
+  run_knob_jobs(store, jobs, o, s);
+
+  std::set<std::int64_t> counted;  // tasks counted in s.finished and s.warned
   for (std::size_t ki = 0; ki < knobs.size(); ++ki) {
     const KnobDef& kd = knobs[ki];
     FidelityKnob k;
@@ -466,193 +668,17 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
       k.jobs.push_back(j.name);
       for (auto& r : select_rows(store, j.name, {})) rows.push_back(std::move(r));
     }
-    const double base_value = d.base.at(kd.params.front()).get<double>();
-    for (const auto& v : kd.values) {
-      FidelityPoint p;
-      p.value = v.get<double>();
-      p.label = label_of(p.value);
-      p.baseline = same_value(p.value, base_value);
-      p.reference = same_value(p.value, kd.reference);
-      std::vector<std::vector<double>> vals(nm);
-      std::vector<double> ok_wall, failed_wall, ok_work;
-      for (const auto& r : rows) {
-        if (!same_value(r.params.at(kd.params.front()).get<double>(), p.value)) continue;
-        ++p.replicas;
-        const double wall = std::isfinite(metric(r, "wall_s")) ? metric(r, "wall_s") : r.task.wall_s;
-        std::string why;
-        if (r.task.status != "done") {
-          why = r.task.error.empty() ? r.task.status : r.task.error;
-        } else {
-          for (const auto& m : d.metrics)
-            if (!std::isfinite(metric(r, m))) why += (why.empty() ? "done but no " : ", ") + m;
-        }
-        const std::string seed = "seed " + r.params.at("seed").dump();
-        if (!why.empty()) {
-          ++p.failed;
-          p.failures.push_back(seed + ": " + why.substr(0, 240));
-          s.failures.push_back(k.name + "=" + p.label + " " + seed + ": " + why.substr(0, 240));
-          if (std::isfinite(wall)) failed_wall.push_back(wall);
-          continue;
-        }
-        // The baseline's tasks stand in every knob's table: counted once.
-        if (counted.insert(r.task.id).second) {
-          ++s.finished;
-          if (const std::string w = db::task_message(r.task).warning; !w.empty()) {
-            ++s.warned;
-            s.not_critical += says_not_at_critical_state(w);
-            s.not_quasi_static += w.find("not quasi-static") != std::string::npos;
-          }
-        }
-        // Marked and listed: one spike can set a setting's mean, spread and verdict
-        // (never for repose, whose results hold no peak).
-        if (peak_on_a_spike(r.metrics)) {
-          const std::string spike = seed + ": phi_peak " + fmt(metric(r, "phi_peak_deg"), 4) +
-                                    " deg, the running mean's peak " + fmt(metric(r, "phi_peak_smoothed_deg"), 4) +
-                                    " deg";
-          p.spikes.push_back(spike);
-          s.spikes.push_back(k.name + "=" + p.label + " " + spike);
-        }
-        ok_wall.push_back(wall);
-        ok_work.push_back(metric(r, "particles") * metric(r, "steps"));
-        for (std::size_t m = 0; m < nm; ++m) vals[m].push_back(metric(r, d.metrics[m]));
-      }
-      const auto mean_of = [](const std::vector<double>& x) {
-        double t = 0;
-        for (double e : x) t += e;
-        return x.empty() ? NAN : t / static_cast<double>(x.size());
-      };
-      p.wall_s = ok_wall.empty() ? mean_of(failed_wall) : mean_of(ok_wall);
-      p.work = mean_of(ok_work);
-      p.mean.assign(nm, NAN);
-      p.sd.assign(nm, NAN);
-      p.error.assign(nm, NAN);
-      for (std::size_t m = 0; m < nm; ++m) {
-        if (vals[m].empty()) continue;
-        p.mean[m] = mean_of(vals[m]);
-        double ss = 0;
-        for (double e : vals[m]) ss += (e - p.mean[m]) * (e - p.mean[m]);
-        p.sd[m] = vals[m].size() > 1 ? std::sqrt(ss / static_cast<double>(vals[m].size() - 1)) : 0.0;
-      }
-      k.points.push_back(p);
-    }
-    const auto ref = std::find_if(k.points.begin(), k.points.end(), [](const FidelityPoint& p) { return p.reference; });
-    const bool have_ref = ref != k.points.end() && std::isfinite(ref->mean[0]);
-    if (have_ref) {
-      for (auto& p : k.points) {
-        double score = 0;
-        for (std::size_t m = 0; m < nm; ++m) {
-          p.error[m] = std::abs(p.mean[m] - ref->mean[m]);
-          score = std::max(score, p.error[m] + p.sd[m]);
-        }
-        p.score = std::isfinite(p.mean[0]) ? score : NAN;
-        p.pass = p.failed == 0 && std::isfinite(p.score) && p.score <= s.tolerance;
-      }
-    }
-    mark_fidelity_pareto(k.points);
-    FidelityPoint* best = nullptr;
-    for (auto& p : k.points)
-      if (p.pass && (!best || p.work < best->work)) best = &p;
-    std::ostringstream rec;
-    rec << k.name << ": ";
-    const std::string ref_label = ref != k.points.end() ? ref->label : label_of(kd.reference);
-    // The reference alone finished: nothing was measured against it.
-    const bool alone = have_ref && std::none_of(k.points.begin(), k.points.end(), [](const FidelityPoint& p) {
-      return !p.reference && std::isfinite(p.mean[0]);
-    });
-    k.judged = have_ref && !alone;
-    if (alone) {
-      rec << "no recommendation: every setting but the reference " << ref_label
-          << " failed in every replica, so nothing was compared with it (the failed tasks are listed below)";
-    } else if (!have_ref) {
-      rec << "no recommendation: the reference " << ref_label << " failed in every replica";
-    } else if (!best) {
-      rec << "no setting within " << fmt(s.tolerance) << " deg of the reference " << ref_label
-          << " (error + replica sd, every replica ok)";
-    } else {
-      best->recommended = true;
-      k.recommended = best->value;
-      // One replica a setting measures no spread: its sd reads 0, and the error alone
-      // (one packing's) is judged. Said, not shown as "+/- 0".
-      const bool spread = s.replicas > 1;
-      rec << "recommended " << best->label << " (";
-      for (std::size_t m = 0; m < nm; ++m)
-        rec << (m ? ", " : "") << short_metric(d.metrics[m]) << " error " << fmt(best->error[m], 2)
-            << (spread ? " +/- " + fmt(best->sd[m], 2) : std::string()) << " deg";
-      rec << "; " << std::llround(best->work / 1e6) << " million particle-steps, " << fmt(best->wall_s, 4)
-          << " s, against " << std::llround(ref->work / 1e6) << " million and " << fmt(ref->wall_s, 4)
-          << " s for the reference " << ref_label
-          << "): the cheapest setting (fewest particle-steps) within " << fmt(s.tolerance) << " deg"
-          << (spread ? " including the replica spread"
-                     : " of one replica, whose spread is not measured: more replicas (--replicas 3) may not confirm it");
-    }
-    std::string spiked;
-    for (const auto& p : k.points)
-      if (!p.spikes.empty())
-        spiked += (spiked.empty() ? "" : ", ") + p.label + (p.reference ? " (the reference)" : "") + ": " +
-                  std::to_string(p.spikes.size()) + " of " + std::to_string(p.replicas);
-    if (!spiked.empty())
-      rec << "; phi_peak rests on a spike of the walls' stress in " << spiked << " replica(s), listed below"
-          << (o.smoothed_peak ? " (judged here by the running mean's peak, " + running_mean_vs_spike() + ")"
-                              : " (--peak smoothed judges the running mean's peak instead)");
-    k.recommendation = rec.str();
+    for (const auto& v : kd.values) k.points.push_back(measure_setting(d, kd, rows, v.get<double>(), s, counted));
+    judge_knob(k, kd, d, s, o.smoothed_peak);
     s.knobs.push_back(std::move(k));
   }
-
-  std::ostringstream summary;
-  summary << "recommended settings (" << s.name << (o.smoothed_peak ? ", phi_peak by its running mean" : "")
-          << ", one knob at a time around the baseline, tolerance " << fmt(s.tolerance) << " deg"
-          << (s.replicas > 1 ? "" : ", one replica a setting: the spread not measured") << "):";
-  bool any = false;
-  for (const auto& k : s.knobs) {
-    summary << (any ? ", " : " ") << k.name << " " << (std::isfinite(k.recommended) ? label_of(k.recommended) : "none");
-    any = true;
-  }
-  s.recommendation = summary.str();
-  if (s.warned > 0) {
-    std::ostringstream w;
-    w << "warnings: " << s.warned << " of the " << s.finished << " finished tasks carry warnings (";
-    if (s.not_critical > 0) w << s.not_critical << " not at critical state, ";
-    if (s.not_quasi_static > 0) w << s.not_quasi_static << " not quasi-static, ";
-    std::set<std::string> names;
-    for (const auto& k : s.knobs) names.insert(k.jobs.begin(), k.jobs.end());
-    std::string list;
-    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
-    w << "demcal query --db " << store.path() << " --job JOB lists them, JOB one of " << list
-      << "): the errors above compare "
-      << "what those runs gave, and a setting judged against a warned reference inherits its warning";
-    s.warnings_note = w.str();
-  }
-
+  summarise(s, store, o.smoothed_peak);
   // A run of some knobs names its files after them, charts included, so that runs of
   // other knobs into the same folder keep theirs, and a chart never shows another run
   // than the table beside it.
   if (knobs.size() < d.knobs.size())
     for (const auto& k : knobs) s.stem += "-" + k.name;
-  const std::string& stem = s.stem;
-  for (auto& k : s.knobs) {
-    write_fidelity_chart(s, k, dir);
-    s.files.push_back(k.chart);
-  }
-  const fs::path csv = dir / (stem + ".csv");
-  write_fidelity_csv(s, csv);
-  s.files.push_back(csv.string());
-  const fs::path rec = dir / (stem + "_recommendation.txt");
-  {
-    WholeTextFile r(rec);
-    for (const auto& k : s.knobs) r << k.recommendation << "\n";
-    r << s.recommendation << "\n";
-    if (!s.warnings_note.empty()) r << s.warnings_note << "\n";
-    if (!s.failures.empty()) {
-      r << "failed tasks:\n";
-      for (const auto& f : s.failures) r << "  " << f << "\n";
-    }
-    if (!s.spikes.empty()) {
-      r << spike_heading() << ":\n";
-      for (const auto& f : s.spikes) r << "  " << f << "\n";
-    }
-    r.commit();
-  }
-  s.files.push_back(rec.string());
+  write_study_files(s, o.out_dir);
   return s;
 }
 
