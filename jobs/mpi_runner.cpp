@@ -192,14 +192,307 @@ namespace {
                     e.bad_input());
 }
 
+// Rank 0's side of the task farm once the job is recorded and its queue read: it
+// answers the worker ranks' messages, declares silent ranks lost, hands out the
+// queued tasks, and ends when no rank is busy or still serving.
+class Farm {
+ public:
+  Farm(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi, const std::string& token,
+       const std::filesystem::path& dir, std::deque<db::TaskRow> queue, RunSummary& s)
+      : store_(store), job_(job), shard_(options.shard), mpi_(mpi), token_(token), dir_(dir),
+        log_(options.log ? *options.log : std::cerr), progress_(log_, options.terminal), spec_(job.spec.dump()),
+        threads_(job.threads > 0 ? job.threads : 1), queue_(std::move(queue)), s_(s) {
+    MPI_Comm_size(MPI_COMM_WORLD, &size_);
+    // The job's counts read the whole job (~13 ms for 10,000 tasks): once here, then
+    // kept up to date by hand, so rank 0's time per task does not grow with the grid.
+    const Counts start = job_counts(store_, job_.name, shard_);
+    live_ = start;
+    s_.reused = start.done;
+    if (start.done > 0) log_ << start.done << " of " << start.total << " task(s) already done, reused\n";
+    log_ << "MPI task farm: " << size_ - 1 << " worker rank(s), " << queue_.size() << " task(s) to run, lost-rank timeout "
+         << mpi_.timeout_s << " s\n";
+    const auto t0 = Clock::now();
+    ranks_.resize(static_cast<std::size_t>(size_));
+    for (auto& r : ranks_) r.last_seen = t0;
+    last_file_check_ = t0;
+  }
+
+  // Until every rank has stopped or is lost, or a stop signal arrives.
+  void serve(Heartbeat& heartbeat) {
+    for (;;) {
+      if (stop_signal()) break;
+      const bool got = drain();
+      // Lost ranks are judged right after the drain, so that a heartbeat which
+      // arrived while rank 0 was busy is read first.
+      const auto now = Clock::now();
+      heartbeat.tick();  // rank 0's own, for runs on other hosts
+      watch_database(now);
+      judge_silence(now);
+      hand_out();
+      if (!busy_or_serving()) break;
+      progress_.update(live_, Eta{});
+      if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  }
+
+  // After serve: a stop signal's running tasks back to the queue, every rank told to
+  // leave, and the summary's counts.
+  void close() {
+    if (stop_signal()) release_running();
+    for (int r = 1; r < size_; ++r) {
+      try {
+        stop_rank(r);
+      } catch (const std::exception&) {
+        // a rank that is gone: nothing to tell
+      }
+    }
+    g_dismissed = true;
+    if (s_.database_lost.empty()) s_.database_lost = database_lost(store_);  // a run shorter than 2 s, or its end
+    if (!queue_.empty() && !s_.interrupted && s_.output_failure.empty() && s_.database_lost.empty())
+      log_ << "no worker rank left: " << queue_.size() << " task(s) stay pending for the next run\n";
+    progress_.finish();
+    record_final_counts(job_counts(store_, job_.name, shard_), s_);
+    s_.ran = ran_;
+    // The job's counts and table are another file's if a run re-recorded the name
+    // meanwhile (the hand-out stopped then).
+    s_.superseded = store_.job_spec(job_.name) != spec_;
+  }
+
+ private:
+  struct Rank {
+    bool ready = false, stopped = false, lost = false, started = false;
+    std::optional<db::TaskRow> task;
+    Clock::time_point last_seen, task_start;
+  };
+
+  Rank& rank(int r) { return ranks_[static_cast<std::size_t>(r)]; }
+  std::string what(const Rank& k) const {
+    return describe_task(job_, static_cast<std::size_t>(k.task->index), k.task->id);
+  }
+
+  // Reads every message that has arrived; whether there was any.
+  bool drain() {
+    bool got = false;
+    for (;;) {
+      MPI_Status st{};
+      int flag = 0;
+      check(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &st), "iprobe");
+      if (!flag) return got;
+      got = true;
+      const std::string text = receive(st);
+      const int r = st.MPI_SOURCE;
+      if (r <= 0 || r >= size_) continue;
+      Rank& k = rank(r);
+      k.last_seen = Clock::now();
+      k.started = true;
+      if (k.lost) {
+        // Declared lost but alive after all (slower than the timeout): its task is
+        // already failed; send it away so it does not wait for work.
+        if (st.MPI_TAG == kTagResult || st.MPI_TAG == kTagReady) {
+          if (st.MPI_TAG == kTagResult) log_ << "late result from rank " << r << " (declared lost) ignored\n";
+          if (!k.stopped) send(r, kTagStop, "");
+          k.stopped = true;
+        }
+        continue;
+      }
+      if (st.MPI_TAG == kTagReady) {
+        k.ready = true;
+      } else if (st.MPI_TAG == kTagResult) {
+        on_result(r, text);
+        k.ready = true;
+      }
+    }
+  }
+
+  // "<task id>\n<result JSON>" from rank r: stored, or the task back in the queue when
+  // only its files could not be written.
+  void on_result(int r, const std::string& text) {
+    Rank& k = rank(r);
+    const auto nl = text.find('\n');
+    const std::int64_t id = nl == std::string::npos ? -1 : std::stoll(text.substr(0, nl));
+    if (!k.task || k.task->id != id) {
+      log_ << "unexpected result for task id " << id << " from rank " << r << " ignored\n";
+      return;
+    }
+    std::optional<db::Outcome> out = parse_worker_result(text.substr(nl + 1));
+    if (out && nlohmann::json::parse(text.substr(nl + 1)).value(kOutputUnwritableKey, false)) {
+      // Not the task's failure: back to the queue, for the run after the folder is fixed.
+      const std::string task = what(k);
+      if (s_.output_failure.empty()) s_.output_failure = task + ": " + out->error;
+      store_.release(k.task->id, token_, "could not write its files: " + out->error + "; will be retried");
+      live_.ended("pending");
+      progress_.line(task + " could not write its files, back in the queue: " + out->error, live_);
+      k.task.reset();
+      return;
+    }
+    if (!out) {
+      fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
+      return;
+    }
+    if (store_.finish(k.task->id, token_, *out)) live_.ended(out->status);
+    ++ran_;
+    std::ostringstream msg;
+    msg << what(k) << " " << out->status << " in " << format_duration(out->wall_s) << " on rank " << r;
+    if (!out->error.empty()) msg << ": " << out->error;
+    progress_.line(msg.str(), live_);
+    k.task.reset();
+  }
+
+  // A deleted database takes every result stored from now on with it: hand out no
+  // more work. The running tasks' results are still received (a rank blocked sending
+  // a large one would hang the job), and the loop ends when no rank is busy.
+  void watch_database(Clock::time_point now) {
+    if (!s_.database_lost.empty() || now - last_file_check_ <= std::chrono::seconds(2)) return;
+    last_file_check_ = now;
+    s_.database_lost = database_lost(store_);
+    if (!s_.database_lost.empty()) {
+      queue_.clear();
+      log_ << "\n" << s_.database_lost << ": no more tasks handed out; the running ones finish first\n";
+    }
+  }
+
+  // Lost ranks: silent beyond the timeout while holding a task, or never started.
+  void judge_silence(Clock::time_point now) {
+    for (int r = 1; r < size_; ++r) {
+      Rank& k = rank(r);
+      if (k.lost || k.stopped) continue;
+      const double silent = seconds(now - k.last_seen);
+      if (k.task && silent > mpi_.timeout_s) {
+        k.lost = true;
+        g_rank_lost = true;
+        log_ << "worker rank " << r << " lost: no message for " << plain_number(mpi_.timeout_s) << " s\n";
+        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + plain_number(mpi_.timeout_s) +
+                         " s); rerun with --retry-failed");
+      } else if (!k.started && silent > std::max(600.0, 10 * mpi_.timeout_s)) {
+        k.lost = true;
+        g_rank_lost = true;
+        log_ << "worker rank " << r << " never reported; not used\n";
+      }
+    }
+  }
+
+  // Work to every ready rank; with none left, idle ranks leave at once (a lost rank's
+  // task is failed, not re-queued, so no work appears later).
+  void hand_out() {
+    const auto deaf_from = Clock::now();
+    for (int r = 1; r < size_; ++r) {
+      Rank& k = rank(r);
+      if (!k.ready || k.lost || k.stopped) continue;
+      if (!s_.output_failure.empty()) {  // the tasks left could not write their files either
+        if (!k.task) stop_rank(r);
+        continue;
+      }
+      while (!queue_.empty() && !k.task) give_next_task(r);
+      if (!k.task && queue_.empty()) stop_rank(r);
+    }
+    // Rank 0 read no messages while it handed out work (database writes a loaded
+    // disk can stall for seconds, and a result larger than MPI's eager limit only
+    // arrives while rank 0 polls): that time is not a worker's silence.
+    const auto deaf_to = Clock::now();
+    for (auto& k : ranks_) k.last_seen = std::min(deaf_to, k.last_seen + (deaf_to - deaf_from));
+  }
+
+  // The queue's next task to rank r, unless another runner claimed it first.
+  void give_next_task(int r) {
+    // Another run recorded a different job file under this name: the queued tasks
+    // left the job, so none more is handed out.
+    if (store_.job_spec(job_.name) != spec_) {
+      queue_.clear();
+      return;
+    }
+    db::TaskRow row = queue_.front();
+    queue_.pop_front();
+    if (!store_.claim(row.id, token_)) return;  // another runner took it
+    ++live_.running;
+    nlohmann::json t = {{"task_id", row.id},
+                        {"index", row.index},
+                        {"scene", row.scene},
+                        {"params", nlohmann::json::parse(row.params_json)},
+                        {"threads", threads_},
+                        {"snapshots", job_.snapshots},
+                        {"task_key", row.key},
+                        {"h5_path", (dir_ / task_file_name(row.id, row.key)).string()},
+                        {"run_tag", file_name_safe(token_)}};
+    send(r, kTagTask, t.dump());
+    Rank& k = rank(r);
+    k.task = std::move(row);
+    k.task_start = k.last_seen = Clock::now();
+    k.ready = false;
+    progress_.line(what(k) + " started on rank " + std::to_string(r), live_);
+    test_root_stall_hook();
+  }
+
+  bool busy_or_serving() {
+    bool busy = false, serving = false;
+    for (int r = 1; r < size_; ++r) {
+      const Rank& k = rank(r);
+      busy = busy || k.task.has_value();
+      serving = serving || (!k.lost && !k.stopped);
+    }
+    return busy || serving;
+  }
+
+  // Plain mpirun ends the whole job with SIGTERM when any rank dies (see
+  // docs/scaling.md): what was running goes back to pending for the next run.
+  void release_running() {
+    log_ << "\n" << (stop_signal() == SIGTERM ? "terminated (SIGTERM: what mpirun sends on Ctrl-C, scancel, or when a rank dies)"
+                                               : stop_signal_words(stop_signal()))
+         << ": running task(s) go back to the queue\n";
+    for (int r = 1; r < size_; ++r) {
+      Rank& k = rank(r);
+      if (k.task) {
+        store_.release(k.task->id, token_, "interrupted; will be retried");
+        live_.ended("pending");
+      }
+      k.task.reset();
+    }
+    s_.interrupted = true;
+  }
+
+  void fail_task(int r, const std::string& why) {
+    Rank& k = rank(r);
+    db::Outcome out;
+    out.status = "failed";
+    out.wall_s = seconds(Clock::now() - k.task_start);
+    out.error = why;
+    if (store_.finish(k.task->id, token_, out)) live_.ended("failed");
+    ++ran_;
+    progress_.line(what(k) + " failed: " + why, live_);
+    k.task.reset();
+  }
+
+  void stop_rank(int r) {
+    Rank& k = rank(r);
+    if (k.stopped || k.lost) return;
+    send(r, kTagStop, "");
+    k.stopped = true;
+    k.ready = false;
+  }
+
+  db::Store& store_;
+  const Job& job_;
+  const Shard shard_;
+  const MpiOptions& mpi_;
+  const std::string& token_;
+  const std::filesystem::path dir_;
+  std::ostream& log_;
+  Progress progress_;
+  const std::string spec_;  // as record_job stores it
+  const int threads_;
+  std::deque<db::TaskRow> queue_;
+  RunSummary& s_;
+  int size_ = 1;
+  Counts live_;
+  std::vector<Rank> ranks_;
+  int ran_ = 0;
+  Clock::time_point last_file_check_;
+};
+
 RunSummary farm(db::Store& store, const Job& job, const RunOptions& options, const MpiOptions& mpi,
                 const std::string& token) {
   std::ostream& log = options.log ? *options.log : std::cerr;
-  int size = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &size);
   StopSignalGuard guard;
   const std::filesystem::path dir = make_task_output_dir(job, options);
-  const std::string spec = job.spec.dump();  // as record_job stores it
   const std::int64_t job_id = record_job(store, job, options.shard, log);
   Heartbeat heartbeat(store, token);  // before the re-queue of dead runners' tasks
   if (options.requeue_running) requeue_running_tasks(store, job_id, log);
@@ -213,234 +506,10 @@ RunSummary farm(db::Store& store, const Job& job, const RunOptions& options, con
   for (auto& row : store.tasks(job.name))
     if (row.status == "pending" && options.shard.contains(static_cast<std::size_t>(row.index)))
       queue.push_back(std::move(row));
-  const int threads = job.threads > 0 ? job.threads : 1;
-
-  Progress progress(log, options.terminal);
-  auto counts = [&] { return job_counts(store, job.name, options.shard); };
   RunSummary s;
-  // counts() reads the whole job (~13 ms for 10,000 tasks): once here, then kept
-  // up to date by hand, so rank 0's time per task does not grow with the grid.
-  const Counts start = counts();
-  Counts live = start;
-  s.reused = start.done;
-  if (start.done > 0) log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  log << "MPI task farm: " << size - 1 << " worker rank(s), " << queue.size() << " task(s) to run, lost-rank timeout "
-      << mpi.timeout_s << " s\n";
-
-  struct Rank {
-    bool ready = false, stopped = false, lost = false, started = false;
-    std::optional<db::TaskRow> task;
-    Clock::time_point last_seen, task_start;
-  };
-  const auto t0 = Clock::now();
-  std::vector<Rank> ranks(static_cast<std::size_t>(size));
-  for (auto& r : ranks) r.last_seen = t0;
-  int ran = 0;
-  auto fail_task = [&](int r, const std::string& why) {
-    Rank& k = ranks[static_cast<std::size_t>(r)];
-    db::Outcome out;
-    out.status = "failed";
-    out.wall_s = seconds(Clock::now() - k.task_start);
-    out.error = why;
-    if (store.finish(k.task->id, token, out)) live.ended("failed");
-    ++ran;
-    progress.line(describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + " failed: " + why, live);
-    k.task.reset();
-  };
-  auto stop_rank = [&](int r) {
-    Rank& k = ranks[static_cast<std::size_t>(r)];
-    if (k.stopped || k.lost) return;
-    send(r, kTagStop, "");
-    k.stopped = true;
-    k.ready = false;
-  };
-
-  auto last_file_check = t0;
-  for (;;) {
-    if (stop_signal()) break;
-    bool got = false;
-    for (;;) {  // drain what has arrived
-      MPI_Status st{};
-      int flag = 0;
-      check(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &st), "iprobe");
-      if (!flag) break;
-      got = true;
-      const std::string text = receive(st);
-      const int r = st.MPI_SOURCE;
-      if (r <= 0 || r >= size) continue;
-      Rank& k = ranks[static_cast<std::size_t>(r)];
-      k.last_seen = Clock::now();
-      k.started = true;
-      if (k.lost) {
-        // Declared lost but alive after all (slower than the timeout): its task is
-        // already failed; send it away so it does not wait for work.
-        if (st.MPI_TAG == kTagResult || st.MPI_TAG == kTagReady) {
-          if (st.MPI_TAG == kTagResult) log << "late result from rank " << r << " (declared lost) ignored\n";
-          if (!k.stopped) send(r, kTagStop, "");
-          k.stopped = true;
-        }
-        continue;
-      }
-      if (st.MPI_TAG == kTagReady) {
-        k.ready = true;
-      } else if (st.MPI_TAG == kTagResult) {
-        const auto nl = text.find('\n');
-        const std::int64_t id = nl == std::string::npos ? -1 : std::stoll(text.substr(0, nl));
-        if (!k.task || k.task->id != id) {
-          log << "unexpected result for task id " << id << " from rank " << r << " ignored\n";
-          k.ready = true;
-          continue;
-        }
-        std::optional<db::Outcome> out = parse_worker_result(text.substr(nl + 1));
-        if (out && nlohmann::json::parse(text.substr(nl + 1)).value(kOutputUnwritableKey, false)) {
-          // Not the task's failure: back to the queue, for the run after the folder is fixed.
-          const std::string what = describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id);
-          if (s.output_failure.empty()) s.output_failure = what + ": " + out->error;
-          store.release(k.task->id, token, "could not write its files: " + out->error + "; will be retried");
-          live.ended("pending");
-          progress.line(what + " could not write its files, back in the queue: " + out->error, live);
-          k.task.reset();
-          k.ready = true;
-          continue;
-        }
-        if (!out) {
-          fail_task(r, "rank " + std::to_string(r) + " sent an unreadable result");
-        } else {
-          if (store.finish(k.task->id, token, *out)) live.ended(out->status);
-          ++ran;
-          std::ostringstream msg;
-          msg << describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) << " " << out->status << " in "
-              << format_duration(out->wall_s) << " on rank " << r;
-          if (!out->error.empty()) msg << ": " << out->error;
-          progress.line(msg.str(), live);
-          k.task.reset();
-        }
-        k.ready = true;
-      }
-    }
-    // Lost ranks: silent beyond the timeout while holding a task, or never started.
-    // Judged right after the drain, so that a heartbeat which arrived while rank 0
-    // was busy is read first.
-    const auto now = Clock::now();
-    heartbeat.tick();  // rank 0's own, for runs on other hosts
-    if (s.database_lost.empty() && now - last_file_check > std::chrono::seconds(2)) {
-      // A deleted database takes every result stored from now on with it: hand out
-      // no more work. The running tasks' results are still received (a rank blocked
-      // sending a large one would hang the job), and the loop ends when no rank is busy.
-      last_file_check = now;
-      s.database_lost = database_lost(store);
-      if (!s.database_lost.empty()) {
-        queue.clear();
-        log << "\n" << s.database_lost << ": no more tasks handed out; the running ones finish first\n";
-      }
-    }
-    for (int r = 1; r < size; ++r) {
-      Rank& k = ranks[static_cast<std::size_t>(r)];
-      if (k.lost || k.stopped) continue;
-      const double silent = seconds(now - k.last_seen);
-      if (k.task && silent > mpi.timeout_s) {
-        k.lost = true;
-        g_rank_lost = true;
-        log << "worker rank " << r << " lost: no message for " << plain_number(mpi.timeout_s) << " s\n";
-        fail_task(r, "worker rank " + std::to_string(r) + " lost (no heartbeat for " + plain_number(mpi.timeout_s) +
-                         " s); rerun with --retry-failed");
-      } else if (!k.started && silent > std::max(600.0, 10 * mpi.timeout_s)) {
-        k.lost = true;
-        g_rank_lost = true;
-        log << "worker rank " << r << " never reported; not used\n";
-      }
-    }
-    // Hand out work; with none left, idle ranks leave at once (a lost rank's task is
-    // failed, not re-queued, so no work appears later).
-    const auto deaf_from = Clock::now();
-    for (int r = 1; r < size; ++r) {
-      Rank& k = ranks[static_cast<std::size_t>(r)];
-      if (!k.ready || k.lost || k.stopped) continue;
-      if (!s.output_failure.empty()) {  // the tasks left could not write their files either
-        if (!k.task) stop_rank(r);
-        continue;
-      }
-      while (!queue.empty() && !k.task) {
-        // Another run recorded a different job file under this name: the queued
-        // tasks left the job, so none more is handed out.
-        if (store.job_spec(job.name) != spec) {
-          queue.clear();
-          break;
-        }
-        db::TaskRow row = queue.front();
-        queue.pop_front();
-        if (!store.claim(row.id, token)) continue;  // another runner took it
-        ++live.running;
-        nlohmann::json t = {{"task_id", row.id},
-                            {"index", row.index},
-                            {"scene", row.scene},
-                            {"params", nlohmann::json::parse(row.params_json)},
-                            {"threads", threads},
-                            {"snapshots", job.snapshots},
-                            {"task_key", row.key},
-                            {"h5_path", (dir / task_file_name(row.id, row.key)).string()},
-                        {"run_tag", file_name_safe(token)}};
-        send(r, kTagTask, t.dump());
-        k.task = std::move(row);
-        k.task_start = k.last_seen = Clock::now();
-        k.ready = false;
-        progress.line(describe_task(job, static_cast<std::size_t>(k.task->index), k.task->id) + " started on rank " +
-                          std::to_string(r),
-                      live);
-        test_root_stall_hook();
-      }
-      if (!k.task && queue.empty()) stop_rank(r);
-    }
-    // Rank 0 read no messages while it handed out work (database writes a loaded
-    // disk can stall for seconds, and a result larger than MPI's eager limit only
-    // arrives while rank 0 polls): that time is not a worker's silence.
-    const auto deaf_to = Clock::now();
-    for (auto& k : ranks) k.last_seen = std::min(deaf_to, k.last_seen + (deaf_to - deaf_from));
-    bool busy = false, serving = false;
-    for (int r = 1; r < size; ++r) {
-      const Rank& k = ranks[static_cast<std::size_t>(r)];
-      busy = busy || k.task.has_value();
-      serving = serving || (!k.lost && !k.stopped);
-    }
-    if (!busy && !serving) break;  // every rank stopped or lost
-    progress.update(live, Eta{});
-    if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  }
-
-  if (stop_signal()) {
-    // Plain mpirun ends the whole job with SIGTERM when any rank dies (see
-    // docs/scaling.md): what was running goes back to pending for the next run.
-    log << "\n" << (stop_signal() == SIGTERM ? "terminated (SIGTERM: what mpirun sends on Ctrl-C, scancel, or when a rank dies)"
-                                                     : stop_signal_words(stop_signal()))
-        << ": running task(s) go back to the queue\n";
-    for (int r = 1; r < size; ++r) {
-      Rank& k = ranks[static_cast<std::size_t>(r)];
-      if (k.task) {
-        store.release(k.task->id, token, "interrupted; will be retried");
-        live.ended("pending");
-      }
-      k.task.reset();
-    }
-    s.interrupted = true;
-  }
-  for (int r = 1; r < size; ++r) {
-    try {
-      stop_rank(r);
-    } catch (const std::exception&) {
-      // a rank that is gone: nothing to tell
-    }
-  }
-  g_dismissed = true;
-  if (s.database_lost.empty()) s.database_lost = database_lost(store);  // a run shorter than 2 s, or its end
-  if (!queue.empty() && !s.interrupted && s.output_failure.empty() && s.database_lost.empty())
-    log << "no worker rank left: " << queue.size() << " task(s) stay pending for the next run\n";
-  progress.finish();
-  const Counts c = counts();
-  record_final_counts(c, s);
-  s.ran = ran;
-  // The job's counts and table are another file's if a run re-recorded the name
-  // meanwhile (the hand-out above stopped then).
-  s.superseded = store.job_spec(job.name) != spec;
+  Farm f(store, job, options, mpi, token, dir, std::move(queue), s);
+  f.serve(heartbeat);
+  f.close();
   return s;
 }
 

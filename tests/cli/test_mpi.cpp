@@ -174,6 +174,42 @@ TEST(Mpi, ADatabaseDeletedMidRunStopsTheHandOut) {
   EXPECT_LE(started, 4) << "tasks went on being handed out after the database was gone:\n" << r.err;
 }
 
+// The task folder replaced by a file mid-run (a disk gone or full): the running
+// task cannot write its files, and every task after it would fail the same way. As
+// a local run does, the farm stops handing out work, leaves those tasks pending
+// (not failed: not their fault) and says so; the folder fixed, a rerun finishes.
+TEST(Mpi, AnOutputFolderThatCannotBeWrittenStopsTheHandOut) {
+  TempDir d;
+  write(d.file("j.json"), collision_job("nowhere", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 30000));
+  const pid_t pid = spawn_program({DEMCAL_MPIEXEC, "-np", "2", "--oversubscribe", DEMCAL_BIN, "run", "j.json", "--mpi"},
+                                  d.path.string(), kMpiEnv);
+  const std::string db = d.file("demcal.db");
+  bool running = false;
+  for (int i = 0; i < 3000 && !running; ++i) {
+    usleep(20000);
+    try {
+      running = fs::exists(db) && count_status(tasks_of(db, "nowhere"), "running") >= 1;
+    } catch (const std::exception&) {
+      // the file is there, its tables not yet
+    }
+  }
+  ASSERT_TRUE(running) << "no task was seen running within 60 s";
+  const fs::path out = d.path / "demcal-out" / "nowhere";
+  fs::rename(out, d.file("moved-away"));
+  write(out.string(), "a file where the folder was\n");
+  const Result r = finish(pid, d.path.string());
+  EXPECT_NE(r.rc, 0) << r.err;
+  EXPECT_NE(r.err.find("could not write its files, back in the queue"), std::string::npos) << r.err;
+  const auto rows = tasks_of(db, "nowhere");
+  EXPECT_EQ(count_status(rows, "running"), 0) << r.err;
+  EXPECT_EQ(count_status(rows, "failed"), 0) << "not the tasks' failure\n" << r.err;
+  EXPECT_GE(count_status(rows, "pending"), 2) << "the task that could not write, and those after it\n" << r.err;
+  fs::remove(out);
+  const Result again = mpirun(2, {}, {"run", "j.json", "--mpi"}, d.path.string());
+  EXPECT_EQ(again.rc, 0) << again.err;
+  EXPECT_EQ(count_status(tasks_of(db, "nowhere"), "done"), 6) << again.err;
+}
+
 // A database rank 0 cannot write (here its file outgrows a size limit) stops the farm
 // as it stops a local run: one error saying what became of the work, the tasks it
 // held back in the queue, and the next run finishes them.
