@@ -19,7 +19,7 @@ namespace demcal::jobs {
 // Not bumped for changes to what is read from an unchanged trajectory, which would
 // throw away hours of stored work to move a reading by round-off: on 2026-11-29 the
 // critical-state window took in a row on its edge (one of ~100: phi_cv moved by
-// 0.003 deg on the 2,000-grain validation run), a shear shorter than the dilatancy
+// 0.009 deg on the 2,000-grain validation run's stored series), a shear shorter than the dilatancy
 // window left max_dilatancy_deg unmeasured (it read -90), and a repose heap at rest
 // by its profile took its time to rest from when it held still. Results stored
 // before keep their readings (docs/validation.md says which).
