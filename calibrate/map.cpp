@@ -110,101 +110,112 @@ std::string fit_targets(const std::string& targets_json, const MetricSpec& wante
   return text;
 }
 
-}  // namespace
-
-void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
-  // Ctrl-C or SIGTERM between the gnuplot passes is recorded and ends the next pass
-  // before it starts: the scratch folder and the part image are removed on the way out.
-  const jobs::StopSignalGuard stop_guard;
-  const std::string ext = extension_of(r.out);
-  if (ext != ".png" && ext != ".svg") throw jobs::JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
-  if (rs.thetas.size() < 2 || rs.etas.size() < 2)
-    throw jobs::JobError("--job", "job \"" + rs.job + "\" has " + std::to_string(rs.thetas.size()) + " theta value(s) and " +
-                                      std::to_string(rs.etas.size()) + " eta value(s); a map needs at least 2 of each");
-  const Box b = rs.box();
-  // Grid nodes: the axis product; a node without a value (or without a task) is a hole.
-  std::map<std::pair<std::size_t, std::size_t>, const GridPoint*> node;
-  for (const auto& p : rs.points)
-    if (!p.refine) node[{nearest(rs.thetas, p.theta), nearest(rs.etas, p.eta)}] = &p;
-  auto masked = [&](double th, double et) {
-    const auto it = node.find({nearest(rs.thetas, th), nearest(rs.etas, et)});
-    return it == node.end() || it->second->hole();
-  };
-  std::vector<std::pair<double, double>> holes;
-  for (std::size_t i = 0; i < rs.thetas.size(); ++i)
-    for (std::size_t j = 0; j < rs.etas.size(); ++j) {
-      const auto it = node.find({i, j});
-      if (it == node.end() || it->second->hole()) holes.emplace_back(rs.thetas[i], rs.etas[j]);
-    }
-
-  const jobs::PrivateTempDir tmp("demcal-map");
-  auto path = [&](const char* n) { return tmp.file(n); };
-
-  // SVG writes every quadrangle as a path: fewer of them keep the file small.
-  const int n = std::max(21, ext == ".svg" ? std::min(r.fine, 81) : r.fine);
-  double zlo = INFINITY, zhi = -INFINITY;
-  {
-    std::ofstream full(path("full.dat")), shown(path("shown.dat"));
-    for (int i = 0; i < n; ++i) {
-      const double th = b.theta_lo + (b.theta_hi - b.theta_lo) * i / (n - 1);
-      for (int j = 0; j < n; ++j) {
-        const double et = b.eta_lo + (b.eta_hi - b.eta_lo) * j / (n - 1);
-        const double z = s(th, et);
-        full << num(th) << " " << num(et) << " " << num(z) << "\n";
-        const bool hide = masked(th, et);
-        shown << num(th) << " " << num(et) << " " << (hide ? std::string("NaN") : num(z)) << "\n";
-        if (!hide) zlo = std::min(zlo, z), zhi = std::max(zhi, z);
-      }
-      full << "\n";
-      shown << "\n";
-    }
-    std::ofstream pts(path("points.dat")), ref(path("refine.dat")), hol(path("holes.dat")), spk(path("spiked.dat"));
+// The grid's nodes (the axis product) and which of them are holes: a node without a
+// task, or whose value is missing.
+class Nodes {
+ public:
+  explicit Nodes(const ResponseSurface& rs) : rs_(rs) {
     for (const auto& p : rs.points)
-      if (!p.hole()) (p.refine ? ref : pts) << num(p.theta) << " " << num(p.eta) << "\n";
-    for (const auto& p : rs.points)
-      if (p.spiked > 0) spk << num(p.theta) << " " << num(p.eta) << "\n";
-    std::ofstream part(path("partial.dat"));
-    for (const auto& p : rs.points)
-      if (p.partial()) part << num(p.theta) << " " << num(p.eta) << "\n";
-    for (const auto& h : holes) hol << num(h.first) << " " << num(h.second) << "\n";
-    if (holes.empty()) hol << "NaN NaN\n";
-    if (r.overlay) {
-      const auto& o = *r.overlay;
-      std::ofstream m(path("mask.dat")), best(path("best.dat"));
-      const int rn = o.region.n;
-      for (int i = 0; i < rn; ++i) {
-        const double th = o.box.theta_lo + (o.box.theta_hi - o.box.theta_lo) * i / (rn - 1);
-        for (int j = 0; j < rn; ++j) {
-          const double et = o.box.eta_lo + (o.box.eta_hi - o.box.eta_lo) * j / (rn - 1);
-          m << num(th) << " " << num(et) << " " << o.region.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] << "\n";
-        }
-        m << "\n";
-      }
-      best << num(o.theta) << " " << num(o.eta) << "\n";
-    }
+      if (!p.refine) node_[{nearest(rs.thetas, p.theta), nearest(rs.etas, p.eta)}] = &p;
   }
-  // One value everywhere, as gnuplot reads the files: it refuses an empty colour range.
-  const bool flat = zlo <= zhi && num(zlo) == num(zhi);
-  // A range around it that prints as two numbers (%.10g): relative, for 2.65e12 too.
-  const double pad = std::max(1e-3 * std::abs(zlo), 1e-12);
-  // Pass 1: contour lines as tables.
+  // Whether the node nearest (th, et) is a hole: the surface is not drawn there.
+  bool masked(double th, double et) const {
+    const auto it = node_.find({nearest(rs_.thetas, th), nearest(rs_.etas, et)});
+    return it == node_.end() || it->second->hole();
+  }
+  std::vector<std::pair<double, double>> holes() const {
+    std::vector<std::pair<double, double>> out;
+    for (std::size_t i = 0; i < rs_.thetas.size(); ++i)
+      for (std::size_t j = 0; j < rs_.etas.size(); ++j) {
+        const auto it = node_.find({i, j});
+        if (it == node_.end() || it->second->hole()) out.emplace_back(rs_.thetas[i], rs_.etas[j]);
+      }
+    return out;
+  }
+
+ private:
+  const ResponseSurface& rs_;
+  std::map<std::pair<std::size_t, std::size_t>, const GridPoint*> node_;
+};
+
+// The surrogate on an n x n grid over the box, whole (full.dat, for the iso-lines)
+// and with the holes' cells blanked (shown.dat, drawn); returns the range of the
+// values shown.
+std::pair<double, double> write_surface(const Surrogate& s, const Box& b, int n, const Nodes& nodes,
+                                        const jobs::PrivateTempDir& tmp) {
+  double zlo = INFINITY, zhi = -INFINITY;
+  std::ofstream full(tmp.file("full.dat")), shown(tmp.file("shown.dat"));
+  for (int i = 0; i < n; ++i) {
+    const double th = b.theta_lo + (b.theta_hi - b.theta_lo) * i / (n - 1);
+    for (int j = 0; j < n; ++j) {
+      const double et = b.eta_lo + (b.eta_hi - b.eta_lo) * j / (n - 1);
+      const double z = s(th, et);
+      full << num(th) << " " << num(et) << " " << num(z) << "\n";
+      const bool hide = nodes.masked(th, et);
+      shown << num(th) << " " << num(et) << " " << (hide ? std::string("NaN") : num(z)) << "\n";
+      if (!hide) zlo = std::min(zlo, z), zhi = std::max(zhi, z);
+    }
+    full << "\n";
+    shown << "\n";
+  }
+  return {zlo, zhi};
+}
+
+// The grid points by kind (with data, refinement runs, holes, a peak on a spike,
+// short of replicas) and the fit's region mask and best point, one file each.
+void write_markers(const ResponseSurface& rs, const Nodes& nodes, const MapRequest& r, const jobs::PrivateTempDir& tmp) {
+  std::ofstream pts(tmp.file("points.dat")), ref(tmp.file("refine.dat")), hol(tmp.file("holes.dat")),
+      spk(tmp.file("spiked.dat"));
+  for (const auto& p : rs.points)
+    if (!p.hole()) (p.refine ? ref : pts) << num(p.theta) << " " << num(p.eta) << "\n";
+  for (const auto& p : rs.points)
+    if (p.spiked > 0) spk << num(p.theta) << " " << num(p.eta) << "\n";
+  std::ofstream part(tmp.file("partial.dat"));
+  for (const auto& p : rs.points)
+    if (p.partial()) part << num(p.theta) << " " << num(p.eta) << "\n";
+  const auto holes = nodes.holes();
+  for (const auto& h : holes) hol << num(h.first) << " " << num(h.second) << "\n";
+  if (holes.empty()) hol << "NaN NaN\n";
+  if (!r.overlay) return;
+  const auto& o = *r.overlay;
+  std::ofstream m(tmp.file("mask.dat")), best(tmp.file("best.dat"));
+  const int rn = o.region.n;
+  for (int i = 0; i < rn; ++i) {
+    const double th = o.box.theta_lo + (o.box.theta_hi - o.box.theta_lo) * i / (rn - 1);
+    for (int j = 0; j < rn; ++j) {
+      const double et = o.box.eta_lo + (o.box.eta_hi - o.box.eta_lo) * j / (rn - 1);
+      m << num(th) << " " << num(et) << " " << o.region.mask[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)] << "\n";
+    }
+    m << "\n";
+  }
+  best << num(o.theta) << " " << num(o.eta) << "\n";
+}
+
+// gnuplot's first pass: the surface's contour lines, and the region's outline, as
+// tables. `flat`: one value everywhere, drawn with a range of +-pad around it.
+void write_contour_tables(const MapRequest& r, bool flat, double zlo, double pad, const jobs::PrivateTempDir& tmp) {
   {
-    std::ofstream g(path("tables.gp"));
+    std::ofstream g(tmp.file("tables.gp"));
     g << "set contour base\nunset surface\nset cntrparam levels auto 10\n";
     // A flat surface has no iso-lines; without a range gnuplot warns of an empty one.
     if (flat) g << "set zrange [" << num(zlo - pad) << ":" << num(zlo + pad) << "]\n";
-    g << "set table " << quoted(path("cont.dat")) << "\nsplot " << quoted(path("full.dat")) << " using 1:2:3 with lines\nunset table\n";
+    g << "set table " << quoted(tmp.file("cont.dat")) << "\nsplot " << quoted(tmp.file("full.dat"))
+      << " using 1:2:3 with lines\nunset table\n";
     if (r.overlay)
-      g << "set autoscale z\nset cntrparam levels discrete 0.5\nset table " << quoted(path("region.dat")) << "\nsplot " << quoted(path("mask.dat"))
-        << " using 1:2:3 with lines\nunset table\n";
+      g << "set autoscale z\nset cntrparam levels discrete 0.5\nset table " << quoted(tmp.file("region.dat"))
+        << "\nsplot " << quoted(tmp.file("mask.dat")) << " using 1:2:3 with lines\nunset table\n";
   }
-  run_gnuplot(path("tables.gp"));
-  // Iso-lines only where the surface is drawn: cut them at the holes' cells.
+  run_gnuplot(tmp.file("tables.gp"));
+}
+
+// Iso-lines only where the surface is drawn, cut at the holes' cells, into iso.dat;
+// returns the longest piece of each level (where its label goes).
+std::vector<Segment> write_isolines(const Nodes& nodes, const jobs::PrivateTempDir& tmp) {
   std::vector<Segment> kept;
-  for (const auto& seg : read_contours(path("cont.dat"))) {
+  for (const auto& seg : read_contours(tmp.file("cont.dat"))) {
     Segment cur{seg.level, {}};
     for (const auto& p : seg.pts) {
-      if (masked(p.first, p.second)) {
+      if (nodes.masked(p.first, p.second)) {
         if (cur.pts.size() >= 2) kept.push_back(cur);
         cur.pts.clear();
       } else {
@@ -214,19 +225,22 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     if (cur.pts.size() >= 2) kept.push_back(cur);
   }
   std::map<std::string, const Segment*> longest;
-  {
-    std::ofstream c(path("iso.dat"));
-    for (const auto& seg : kept) {
-      for (const auto& p : seg.pts) c << num(p.first) << " " << num(p.second) << "\n";
-      c << "\n";
-      auto& l = longest[seg.level];
-      if (!l || seg.pts.size() > l->pts.size()) l = &seg;
-    }
-    if (kept.empty()) c << "NaN NaN\n";
+  std::ofstream c(tmp.file("iso.dat"));
+  for (const auto& seg : kept) {
+    for (const auto& p : seg.pts) c << num(p.first) << " " << num(p.second) << "\n";
+    c << "\n";
+    auto& l = longest[seg.level];
+    if (!l || seg.pts.size() > l->pts.size()) l = &seg;
   }
+  if (kept.empty()) c << "NaN NaN\n";
+  std::vector<Segment> out;
+  for (const auto& [level, seg] : longest) out.push_back(*seg);
+  return out;
+}
 
-  jobs::ImageFile image(r.out);
-  std::ofstream g(path("map.gp"));
+// The chart's title: metric, job, points, holes and warnings, then the surrogate.
+std::string map_title(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
+  if (!r.title.empty()) return quoted(r.title);
   // Two lines: on one, a long metric label and surrogate ran past the 900-pixel width.
   // A string, not a fixed buffer: a long job name cut mid-character made the SVG invalid.
   const std::string title = rs.label + ", job " + rs.job + (r.pins.empty() ? "" : " (" + r.pins + ")") + ": " +
@@ -234,9 +248,19 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
                             " holes" +
                             (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : "") +
                             (rs.warned > 0 ? ", " + std::to_string(rs.warned) + " result(s) warned" : "");
-  g << terminal_line(ext) << "set output " << quoted(image.part()) << "\n"
-    << "set title " << (r.title.empty() ? quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe(metric_spec(rs.metric).unit)) : quoted(r.title))
-    << " noenhanced font ',10' offset 0,0.6\n"
+  return quoted(title) + ".\"\\n\"." + quoted("surrogate: " + s.describe(metric_spec(rs.metric).unit));
+}
+
+// gnuplot's second pass: the coloured surface, iso-lines with their labels, the grid
+// points by kind and the fit's region, into the image's part file.
+void write_map_script(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r, const std::string& ext,
+                      const std::string& part, const std::vector<Segment>& longest, bool flat, double zlo, double zhi,
+                      double pad, const jobs::PrivateTempDir& tmp) {
+  const Box b = rs.box();
+  auto path = [&](const char* n) { return tmp.file(n); };
+  std::ofstream g(path("map.gp"));
+  g << terminal_line(ext) << "set output " << quoted(part) << "\n"
+    << "set title " << map_title(rs, s, r) << " noenhanced font ',10' offset 0,0.6\n"
     << "set xlabel 'theta (deg)'\nset ylabel 'eta'\nset cblabel "
     << quoted(flat ? rs.label + ": " + num(zlo) + " everywhere" : rs.label) << " noenhanced\n"
     << "set xrange [" << num(b.theta_lo) << ":" << num(b.theta_hi) << "]\nset yrange [" << num(b.eta_lo) << ":" << num(b.eta_hi)
@@ -249,10 +273,10 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
     g << "set cbrange [" << num(zlo) << ":" << num(zhi) << "]\n";
   }
   int label = 1;
-  for (const auto& [level, seg] : longest) {
-    if (seg->pts.size() < 4) continue;
-    const auto& p = seg->pts[seg->pts.size() / 2];
-    g << "set label " << label++ << " " << quoted(level) << " at " << num(p.first) << "," << num(p.second)
+  for (const auto& seg : longest) {
+    if (seg.pts.size() < 4) continue;
+    const auto& p = seg.pts[seg.pts.size() / 2];
+    g << "set label " << label++ << " " << quoted(seg.level) << " at " << num(p.first) << "," << num(p.second)
       << ",0 center front boxed font ',8'\n";
   }
   // What the drawn fit inverted, under the key (in the key, a long entry pushes
@@ -281,8 +305,34 @@ void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r
       << r.overlay->fit_id << ")', \\\n  " << quoted(path("best.dat"))
       << " using 1:2:(0) with points pt 3 ps 3 lw 3 lc rgb 'magenta' title 'best fit'";
   g << "\n";
-  g.close();
-  run_gnuplot(path("map.gp"));
+}
+
+}  // namespace
+
+void draw_map(const ResponseSurface& rs, const Surrogate& s, const MapRequest& r) {
+  // Ctrl-C or SIGTERM between the gnuplot passes is recorded and ends the next pass
+  // before it starts: the scratch folder and the part image are removed on the way out.
+  const jobs::StopSignalGuard stop_guard;
+  const std::string ext = extension_of(r.out);
+  if (ext != ".png" && ext != ".svg") throw jobs::JobError("--out", "must end in .png or .svg, got \"" + r.out + "\"");
+  if (rs.thetas.size() < 2 || rs.etas.size() < 2)
+    throw jobs::JobError("--job", "job \"" + rs.job + "\" has " + std::to_string(rs.thetas.size()) + " theta value(s) and " +
+                                      std::to_string(rs.etas.size()) + " eta value(s); a map needs at least 2 of each");
+  const Nodes nodes(rs);
+  const jobs::PrivateTempDir tmp("demcal-map");
+  // SVG writes every quadrangle as a path: fewer of them keep the file small.
+  const int n = std::max(21, ext == ".svg" ? std::min(r.fine, 81) : r.fine);
+  const auto [zlo, zhi] = write_surface(s, rs.box(), n, nodes, tmp);
+  write_markers(rs, nodes, r, tmp);
+  // One value everywhere, as gnuplot reads the files: it refuses an empty colour range.
+  const bool flat = zlo <= zhi && num(zlo) == num(zhi);
+  // A range around it that prints as two numbers (%.10g): relative, for 2.65e12 too.
+  const double pad = std::max(1e-3 * std::abs(zlo), 1e-12);
+  write_contour_tables(r, flat, zlo, pad, tmp);
+  const std::vector<Segment> longest = write_isolines(nodes, tmp);
+  jobs::ImageFile image(r.out);
+  write_map_script(rs, s, r, ext, image.part(), longest, flat, zlo, zhi, pad, tmp);
+  run_gnuplot(tmp.file("map.gp"));
   image.commit();
 }
 
