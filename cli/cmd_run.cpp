@@ -61,8 +61,7 @@ int run(const RunArgs& a) {
   const jobs::RunSummary s = jobs::run_job(store, job, opt);
 #endif
   if (!s.database_lost.empty()) {
-    std::cerr << "demcal: error: " << s.database_lost << ": this run's results since then went with the old file, "
-              << "and the run stopped. Run the job again into a database that stays put\n";
+    std::cerr << "demcal: error: " << s.database_lost << ": " << jobs::lost_database_advice(s) << "\n";
     return kRuntime;
   }
   if (s.superseded) {

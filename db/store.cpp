@@ -6,9 +6,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <set>
 #include <thread>
 #include <sys/stat.h>
+#include <unistd.h>
 
 namespace demcal::db {
 namespace {
@@ -87,6 +89,49 @@ Store::Store(const std::string& path, bool read_only) : path_(path), conn_(check
     dev_ = st.st_dev;
     ino_ = st.st_ino;
   }
+  if (::stat((path_ + "-wal").c_str(), &st) == 0) {  // made by migrate's first read
+    wal_dev_ = st.st_dev;
+    wal_ino_ = st.st_ino;
+  }
+}
+
+Store::~Store() {
+  if (!file_lost().empty()) empty_log_of_lost_file();
+}
+
+// The store's write-ahead log lies at the path beside whatever file is there now, and
+// the next opener of that file would replay its frames into it (a restored backup read
+// back as the lost file). SQLite itself keeps the log of a moved file when it closes,
+// for fear of losing them. A truncating checkpoint writes them into the file this store
+// holds open and leaves the log empty.
+void Store::empty_log_of_lost_file() {
+  if (sqlite3_exec(conn_.handle(), "PRAGMA wal_checkpoint(TRUNCATE)", nullptr, nullptr, nullptr) == SQLITE_OK) return;
+  // Another connection to the lost file holds the log: moved from the path, if the log
+  // there is still this store's.
+  struct stat st {};
+  const std::string wal = path_ + "-wal";
+  if (wal_ino_ != 0 && ::stat(wal.c_str(), &st) == 0 && st.st_dev == wal_dev_ && st.st_ino == wal_ino_)
+    std::rename(wal.c_str(), (wal + ".of-lost-file-" + std::to_string(::getpid())).c_str());
+}
+
+std::string Store::save_lost_file() {
+  if (file_lost().empty()) return "";
+  sqlite3* db = conn_.handle();
+  std::string saved = path_ + ".saved-" + std::to_string(::getpid());
+  struct stat st {};
+  for (int k = 2; ::stat(saved.c_str(), &st) == 0; ++k)
+    saved = path_ + ".saved-" + std::to_string(::getpid()) + "-" + std::to_string(k);
+  sqlite3* out = nullptr;
+  bool ok = sqlite3_open_v2(saved.c_str(), &out, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) == SQLITE_OK;
+  if (ok) {
+    sqlite3_backup* b = sqlite3_backup_init(out, "main", db, "main");
+    ok = b != nullptr && sqlite3_backup_step(b, -1) == SQLITE_DONE;
+    if (b != nullptr) ok = sqlite3_backup_finish(b) == SQLITE_OK && ok;
+  }
+  sqlite3_close(out);
+  if (ok) return saved;
+  for (const char* suffix : {"", "-journal", "-wal", "-shm"}) std::remove((saved + suffix).c_str());
+  return "";
 }
 
 std::string Store::file_lost() const {

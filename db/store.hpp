@@ -54,6 +54,9 @@ class Store {
   // Checks the file read-only first (see check_file), then opens it read-write,
   // switches on WAL and migrates. `read_only` skips the write part entirely.
   explicit Store(const std::string& path, bool read_only = false);
+  ~Store();
+  Store(const Store&) = delete;
+  Store& operator=(const Store&) = delete;
 
   // Records the job (by name; a changed spec replaces the old one) and links it to
   // its tasks, creating those whose key is new. Returns the job id.
@@ -120,15 +123,22 @@ class Store {
   // it ("deleted", "replaced by another file"). A run whose database file is deleted
   // writes on into the unlinked file and its results vanish with it.
   std::string file_lost() const;
+  // After file_lost: copies what this store still holds (the lost file, with this
+  // run's results) beside the path. Returns the copy's path, "" when none could be
+  // written. (The store's write-ahead log is emptied when the store closes, so that
+  // it is not replayed into the file now at the path.)
+  std::string save_lost_file();
 
  private:
   // Running tasks (of one job, or all) whose holder `take` names go back to pending
   // with `note` as their error. A task without a holder (NULL) is holder "".
+  void empty_log_of_lost_file();
   int requeue_held(std::optional<std::int64_t> job_id, const std::function<bool(const std::string& worker)>& take,
                    const char* note);
   std::string path_;
   Connection conn_;
-  unsigned long long dev_ = 0, ino_ = 0;  // the opened file's identity
+  unsigned long long dev_ = 0, ino_ = 0;          // the opened file's identity
+  unsigned long long wal_dev_ = 0, wal_ino_ = 0;  // and its write-ahead log's
 };
 
 double unix_now();

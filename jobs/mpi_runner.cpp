@@ -256,6 +256,7 @@ class Farm {
     // The job's counts and table are another file's if a run re-recorded the name
     // meanwhile (the hand-out stopped then).
     s_.superseded = store_.job_spec(job_.name) != spec_;
+    save_lost_database(store_, s_);
   }
 
  private:

@@ -527,6 +527,7 @@ RunSummary Runner::run_loop() {
   s.ran = ran_;
   s.superseded = superseded_;
   s.output_failure = output_failure_;
+  save_lost_database(store_, s);
   return s;
 }
 
@@ -579,7 +580,7 @@ std::string file_name_safe(std::string s) {
 }
 
 void throw_if_stopped_short(const RunSummary& s, const std::string& context) {
-  if (!s.database_lost.empty()) throw std::runtime_error(context + ": " + s.database_lost);
+  if (!s.database_lost.empty()) throw std::runtime_error(context + ": " + s.database_lost + ": " + lost_database_advice(s));
   if (!s.output_failure.empty())
     throw std::runtime_error(context + " stopped: " + s.output_failure +
                              "; free space in (or fix) the output folder and run it again: those tasks are pending");
@@ -588,6 +589,19 @@ void throw_if_stopped_short(const RunSummary& s, const std::string& context) {
 std::string database_lost(const db::Store& store) {
   const std::string lost = store.file_lost();
   return lost.empty() ? "" : "the database " + store.path() + " was " + lost + " while this run was writing it";
+}
+
+void save_lost_database(db::Store& store, RunSummary& s) {
+  if (!s.database_lost.empty()) s.database_saved = store.save_lost_file();
+}
+
+std::string lost_database_advice(const RunSummary& s) {
+  if (s.database_saved.empty())
+    return "this run's results since then went with the old file, and the run stopped. Run the job again into a "
+           "database that stays put";
+  return "the run stopped, and the old file with this run's results is saved as " + s.database_saved +
+         " (demcal merge --into DATABASE " + s.database_saved + " adds them to a database; a rerun of the job "
+         "there reuses them)";
 }
 
 void make_folder(const std::string& dir, const std::string& flag, const std::string& what) {

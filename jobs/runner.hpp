@@ -36,6 +36,9 @@ struct RunSummary {
   // The database file was deleted or replaced while this run wrote to it: the run
   // stopped its tasks. What happened, else empty.
   std::string database_lost;
+  // Where the lost file, with this run's results, was copied (Store::save_lost_file);
+  // empty if it could not be.
+  std::string database_saved;
 };
 
 // Records the job, re-queues tasks of dead runners, runs what is pending until
@@ -58,6 +61,12 @@ void throw_if_stopped_short(const RunSummary& s, const std::string& context);
 // Empty while the database file `store` opened is still at its path; else a sentence
 // saying it was deleted or replaced during the run.
 std::string database_lost(const db::Store& store);
+// At the end of a run whose database was lost: its write-ahead log emptied, so the
+// file now at the path is not overwritten by it, and the lost file saved
+// (s.database_saved). What the user reads after s.database_lost: what became of the
+// run's results and how to get them back.
+void save_lost_database(db::Store& store, RunSummary& s);
+std::string lost_database_advice(const RunSummary& s);
 // Where a run's HDF5 files go: <out_dir>/<job>[/shard-i-of-N], absolute.
 std::string task_output_dir(const Job& job, const RunOptions& options);
 // Creates `dir` and its parents: throws JobError(flag) naming the `what` ("folder",

@@ -284,6 +284,42 @@ TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
             std::string::npos) << r.err;
 }
 
+// A backup copied over the database mid-run: the run stops, and its write-ahead log,
+// which SQLite leaves at the path because the file it belongs to moved, must not be
+// replayed into the backup by the next command (a read-only status did, and the
+// backup read back as the lost file). The lost file, with the run's results, is
+// saved beside it, and a merge brings them back.
+TEST(Runner, ADatabaseReplacedMidRunIsNotOverwrittenByTheRunsLog) {
+  TempDir d;
+  write(d.file("other.json"), collision_job("other", {0.05, 0.06}));
+  ASSERT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
+  write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  ASSERT_TRUE(one_task_seen_running(db, "slow")) << "no task was seen running within 60 s";
+  fs::copy_file(d.file("backup.db"), d.file("restore.tmp"));
+  fs::rename(d.file("restore.tmp"), db);
+  const Result r = finish(runner, d.path.string());
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("was replaced by another file while this run was writing it: the run stopped, and the old "
+                       "file with this run's results is saved as demcal.db.saved-"),
+            std::string::npos) << r.err;
+  const Result st = run_demcal({"status"}, d.path.string());
+  EXPECT_EQ(st.rc, 0) << st.err;
+  EXPECT_NE(st.out.find("other"), std::string::npos) << st.out;
+  EXPECT_EQ(st.out.find("slow"), std::string::npos) << "the run's log was replayed into the backup:\n" << st.out;
+  EXPECT_EQ(tasks_of(db, "other").size(), 2u);
+  std::string saved;
+  for (const auto& e : fs::directory_iterator(d.path))
+    if (e.path().filename().string().rfind("demcal.db.saved-", 0) == 0) saved = e.path().filename().string();
+  ASSERT_FALSE(saved.empty()) << r.err;
+  EXPECT_EQ(tasks_of(d.file(saved), "slow").size(), 6u);
+  const Result m = run_demcal({"merge", "--into", "demcal.db", saved}, d.path.string());
+  EXPECT_EQ(m.rc, 0) << m.err;
+  EXPECT_EQ(tasks_of(db, "slow").size(), 6u);
+  EXPECT_EQ(tasks_of(db, "other").size(), 2u);
+}
+
 TEST(Runner, TwoDatabasesSharingAnOutputFolderKeepTheirOwnResults) {
   // Two databases in one folder share the default demcal-out/, and both number their
   // tasks from 1. With result files named by task id alone, runs of one job name into
