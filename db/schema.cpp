@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sys/stat.h>
+#include <vector>
 
 namespace demcal::db {
 namespace {
@@ -91,29 +92,53 @@ void check_header(const std::string& path) {
     throw DbError(path + " is not a SQLite database (and was left untouched)", true);
 }
 
-// The tables each schema version has. A demcal file that lacks one (a table
-// dropped by hand, a version reset) would fail half-way through a run, after
-// writing to it: refused up front instead.
+// The tables each schema version has, and the columns demcal reads in each. A demcal
+// file that lacks one (a table or column dropped by hand, a version reset) would fail
+// half-way through a run, after writing to it: refused up front instead. (Columns
+// added by hand are left alone.)
+struct TableColumns {
+  const char* table;
+  std::vector<const char*> columns;
+  int since;  // the schema version that made it
+};
+const std::vector<TableColumns>& demcal_tables() {
+  static const std::vector<TableColumns> tables = {
+      {"jobs", {"id", "name", "spec_json", "created_at", "updated_at"}, 1},
+      {"tasks",
+       {"id", "job_id", "scene", "params_json", "key", "status", "attempts", "worker", "pid", "started_at",
+        "finished_at", "wall_s", "error"},
+       1},
+      {"job_tasks", {"job_id", "idx", "task_id"}, 1},
+      {"metrics", {"task_id", "name", "value"}, 1},
+      {"artifacts", {"task_id", "kind", "path"}, 1},
+      {"fits", {"id", "created_at", "targets_json", "method", "result_json"}, 1},
+      {"runners", {"token", "last_seen"}, 2},
+  };
+  return tables;
+}
+
 void require_tables(Connection& c, const std::string& path, int version, int tables) {
   if (version == 0) {
     if (tables > 0)
       throw DbError(path + " is a damaged demcal database: schema version 0, yet it holds tables (left untouched)", true);
     return;
   }
-  static const char* const kTables[][7] = {
-      {"jobs", "tasks", "job_tasks", "metrics", "artifacts", "fits", nullptr},  // version 1
-      {"jobs", "tasks", "job_tasks", "metrics", "artifacts", "fits", "runners"},  // version 2
-  };
-  static_assert(sizeof(kTables) / sizeof(kTables[0]) == kSchemaVersion, "one table list per version");
+  const std::string where = " (schema version " + std::to_string(version) + "; left untouched)";
   Statement q = c.prepare("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?");
-  for (const char* name : kTables[version - 1]) {
-    if (!name) continue;
+  Statement cols = c.prepare("SELECT count(*) FROM pragma_table_info(?) WHERE name = ?");
+  for (const auto& t : demcal_tables()) {
+    if (t.since > version) continue;
     q.reset();
-    q.bind(1, std::string(name));
+    q.bind(1, std::string(t.table));
     if (!q.step() || q.int64(0) == 0)
-      throw DbError(path + " is a damaged demcal database: table " + name + " is missing (schema version " +
-                        std::to_string(version) + "; left untouched)",
-                    true);
+      throw DbError(path + " is a damaged demcal database: table " + t.table + " is missing" + where, true);
+    for (const char* column : t.columns) {
+      cols.reset();
+      cols.bind(1, std::string(t.table)).bind(2, std::string(column));
+      if (!cols.step() || cols.int64(0) == 0)
+        throw DbError(path + " is a damaged demcal database: table " + t.table + " has no column " + column + where,
+                      true);
+    }
   }
 }
 

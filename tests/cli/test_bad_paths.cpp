@@ -193,6 +193,19 @@ TEST(BadPaths, ADamagedDemcalDatabaseIsRefusedUntouched) {
   EXPECT_NE(r.err.find("reset.db is a damaged demcal database: schema version 0"), std::string::npos) << r.err;
   EXPECT_EQ(dump(d.file("dropped.db")), dropped);
   EXPECT_EQ(dump(d.file("reset.db")), reset);
+  // A column dropped: refused as damaged by every command, not a raw SQLite error
+  // after a run wrote its runner row (exit 1, "once the database can be written").
+  fs::copy_file(d.file("ok.db"), d.file("column.db"));
+  sql(d.file("column.db"), "ALTER TABLE tasks DROP COLUMN wall_s;");
+  const std::string column = dump(d.file("column.db"));
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+           {"run", "j.json", "--db", "column.db"}, {"status", "--db", "column.db"}, {"query", "--db", "column.db"}}) {
+    r = run_demcal(args, d.path.string());
+    EXPECT_EQ(r.rc, 2) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find("column.db is a damaged demcal database: table tasks has no column wall_s"), std::string::npos)
+        << args[0] << ": " << r.err;
+  }
+  EXPECT_EQ(dump(d.file("column.db")), column);
 }
 
 TEST(BadPaths, FilesThatCannotBeJobsAreRefused) {
