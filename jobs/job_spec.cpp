@@ -188,6 +188,19 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
                      "task #" + std::to_string(t.index) + ": the time step works out to " + std::to_string(f.dt) +
                          " s, not a finite positive number (dt_factor x sqrt(m_min / kn), with the scene's stiffness "
                          "scale): check material.kn, the stiffness scale, the diameters and the density");
+    // A density of 1e-300 passes "> 0", and the smallest grain's moment of inertia
+    // rounds to 0: every step would read as past a critical step of 0 s, "a dt_factor
+    // of at most 0", blaming the step for the density.
+    if (!(std::isfinite(f.dt_critical) && f.dt_critical > 0.0)) {
+      const bool scaled = t.params.contains("scaled_density");
+      std::ostringstream crit;
+      crit << std::setprecision(4) << f.dt_critical;
+      throw JobError(scaled ? scene.name + ".scaled_density" : "material.density",
+                     "task #" + std::to_string(t.index) + ": the critical time step works out to " + crit.str() +
+                         " s: the smallest grain's mass or moment of inertia is not a "
+                         "normal positive number (density x pi d_min^3 / 6, and 0.1 of that x d_min^2); check the " +
+                         (scaled ? "scaled density" : "density") + " and the diameters");
+    }
     if (!f.exceeds()) continue;
     if (shown == 5) {
       ++more;

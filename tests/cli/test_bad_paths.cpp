@@ -226,6 +226,19 @@ TEST(BadPaths, FilesThatCannotBeJobsAreRefused) {
   r = run_demcal({"validate", "soft.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("material.kn: task #0: the time step works out to inf s"), std::string::npos) << r.err;
+  // A density that passes "> 0" but leaves the smallest grain no moment of inertia:
+  // named, not read as every step past a critical step of 0 s.
+  j = nlohmann::json::parse(collision_job("light", {0.1}));
+  j["material"]["density"] = 1e-300;
+  write(d.file("light.json"), j.dump());
+  r = run_demcal({"validate", "light.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("material.density: task #0: the critical time step works out to 0 s"), std::string::npos) << r.err;
+  write(d.file("light-tx.json"), R"({"name": "ltx", "scene": "triaxial", "fidelity": "quick",
+                                     "triaxial": {"scaled_density": 1e-300}})");
+  r = run_demcal({"validate", "light-tx.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("triaxial.scaled_density: task #0: the critical time step"), std::string::npos) << r.err;
   // A column that would need billions of grains.
   write(d.file("big.json"), R"({"name": "big", "scene": "repose", "fidelity": "quick",
                                 "repose": {"column_width": 10, "column_height": 10, "depth_diameters": 1000}})");
