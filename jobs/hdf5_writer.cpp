@@ -172,13 +172,36 @@ void write_task_hdf5(const std::string& path, const TaskFileInfo& info, const nl
   file.commit("HDF5 file");
 }
 
+namespace {
+
+// Why a task's file cannot be read, in words: HDF5's own detail ("H5Fopen failed")
+// does not tell a truncated file from one that is not HDF5 at all.
+std::runtime_error unreadable(const std::string& path, const H5::Exception& e) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  std::string why;
+  if (ec) {
+    why = ec.message();
+  } else if (size == 0) {
+    why = "an empty file";
+  } else {
+    const std::string bytes = " (" + std::to_string(size) + " bytes)";
+    why = H5Fis_hdf5(path.c_str()) > 0 ? "an HDF5 file that cannot be read" + bytes +
+                                             ": truncated or damaged (HDF5: " + e.getDetailMsg() + ")"
+                                       : "not an HDF5 file" + bytes + ": damaged or overwritten";
+  }
+  return std::runtime_error("cannot read " + path + ": " + why);
+}
+
+}  // namespace
+
 std::string read_task_key(const std::string& path) {
   H5::Exception::dontPrint();
   try {
     H5::H5File f(path, H5F_ACC_RDONLY);
     return f.attrExists("task_key") ? read_string_attr(f, "task_key") : std::string();
   } catch (const H5::Exception& e) {
-    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+    throw unreadable(path, e);
   }
 }
 
@@ -210,7 +233,7 @@ engine::Series read_series(const std::string& path, const std::string& name) {
     }
     return s;
   } catch (const H5::Exception& e) {
-    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+    throw unreadable(path, e);
   }
 }
 
@@ -222,7 +245,7 @@ std::vector<std::string> series_names(const std::string& path) {
     H5::Group g = f.openGroup("series");
     for (hsize_t i = 0; i < g.getNumObjs(); ++i) out.push_back(g.getObjnameByIdx(i));
   } catch (const H5::Exception& e) {
-    throw std::runtime_error("cannot read " + path + ": " + e.getDetailMsg());
+    throw unreadable(path, e);
   }
   return out;
 }

@@ -104,6 +104,37 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
 // cause, no crash, no .part left. HDF5 reports the failure when the file is closed,
 // and a second close of that file (the C++ destructor's) crashed the worker with
 // SIGSEGV. In a child process, so that the limit and a crash stay there.
+// A damaged task file is read with the reason: HDF5 alone says "H5Fopen failed",
+// whether the file was cut short or is not HDF5 at all.
+TEST(TaskFile, ADamagedFileIsNamedWithWhatIsWrongWithIt) {
+  demcal::test::TempDir d;
+  engine::Series s;
+  s.name = "energy";
+  s.columns = {"time", "total"};
+  s.units = {"s", "J"};
+  s.rows = {{0.0, 1.0}, {1.0, 1.0}};
+  const std::string f = d.file("1-abcdef01.h5");
+  write_task_hdf5(f, {"collision", "abcdef0123456789", 1, "done", ""}, {{"seed", 1}}, {s}, {});
+  const auto size = std::filesystem::file_size(f);
+  auto error_of = [&](auto&& read) {
+    try {
+      read();
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  std::filesystem::resize_file(f, size / 2);
+  EXPECT_NE(error_of([&] { read_series(f, "energy"); }).find("an HDF5 file that cannot be read (" +
+                                                             std::to_string(size / 2) + " bytes): truncated or damaged"),
+            std::string::npos);
+  std::ofstream(f, std::ios::trunc) << std::string(4000, 'x');
+  EXPECT_NE(error_of([&] { read_task_key(f); }).find("cannot read " + f + ": not an HDF5 file (4000 bytes)"),
+            std::string::npos);
+  std::ofstream(f, std::ios::trunc).close();
+  EXPECT_NE(error_of([&] { series_names(f); }).find(": an empty file"), std::string::npos);
+}
+
 TEST(TaskFile, AFullDiskMidWriteIsAnErrorNotACrash) {
   demcal::test::TempDir d;
   const std::string path = d.file("3-abcdef03.h5");
