@@ -6,6 +6,8 @@
 #include "jobs/work_forecast.hpp"
 
 #include <iostream>
+#include <map>
+#include <set>
 #include <unordered_map>
 #include <vector>
 
@@ -62,6 +64,29 @@ void print_work(const jobs::Job& job, const std::string& db) {
               << ": the forecast is at the yardstick\n";
 }
 
+// Where each of the first task's flat parameters goes in a job file: the flat names
+// are the grid's axes and query's keys, and a section takes its own keys (a material
+// key in the scene's section is refused; "d_min" there is "diameter.min").
+void print_sections(const jobs::Job& job) {
+  const jobs::SceneDef* scene = jobs::find_scene(job.scene);
+  if (!scene) return;
+  const nlohmann::json& params = job.tasks.front().params;
+  std::map<std::string, std::string> lists;
+  std::set<std::string> placed;
+  for (const auto& spec : scene->params) {
+    if (!params.contains(spec.name) || !placed.insert(spec.name).second) continue;
+    std::string& l = lists[spec.section];
+    l += (l.empty() ? "" : ", ") + spec.key + (spec.key == spec.name ? "" : " (" + spec.name + ")");
+  }
+  std::string top;
+  for (const auto& item : params.items())
+    if (!placed.count(item.key())) top += (top.empty() ? "" : ", ") + item.key();
+  std::cout << "in a job file:\n";
+  for (const std::string& section : {std::string("material"), job.scene})
+    if (lists.count(section)) std::cout << "  \"" << section << "\": {" << lists[section] << "}\n";
+  if (!top.empty()) std::cout << "  top level: " << top << "\n";
+}
+
 }  // namespace
 
 void add_validate(CLI::App& app, int& exit_code) {
@@ -82,6 +107,7 @@ void add_validate(CLI::App& app, int& exit_code) {
                 << (axes.empty() ? std::string() : " over " + axes) << ", " << job.replicas << " replica(s)\n"
                 << "first task (key " << job.tasks.front().key << "):\n"
                 << job.tasks.front().params.dump(2) << "\n";
+      print_sections(job);
       print_work(job, *db);
       print_notes(*file, job.notes);
       return kOk;

@@ -171,6 +171,15 @@ nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const s
 }
 
 std::string closest(const std::string& word, const std::vector<std::string>& candidates) {
+  // A name without its unit or part ("theta" for "theta_deg", "confining" for
+  // "confining_kpa"): closer than any typo ("theta" is two edits from "eta").
+  std::string prefixed;
+  if (word.size() >= 3)
+    for (const auto& c : candidates)
+      if (c.size() > word.size() && c.compare(0, word.size(), word) == 0 &&
+          (c[word.size()] == '_' || c[word.size()] == '.') && (prefixed.empty() || c.size() < prefixed.size()))
+        prefixed = c;
+  if (!prefixed.empty()) return prefixed;
   std::string best;
   std::size_t best_d = 3;  // more than two edits apart is not a typo
   for (const auto& c : candidates) {

@@ -308,6 +308,11 @@ std::string advice(const nlohmann::json& p) {
        << c.prep_strain_rate << " /s and a step of " << step << " s, need about " << steps_to_close
        << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget";
+  // theta_deg defaults to 0, so a job that forgets it tests frictionless grains, and
+  // nothing else says so (a triaxial test of them is legal: it runs, to other angles).
+  if (c.material.friction_angle == 0.0)
+    next_note(os, 2) << "material.theta_deg is 0 (the default when a job leaves it out): the grains are frictionless, "
+          "and the test measures a frictionless packing's angles, not a sand's";
   // Without friction no tangential force turns a grain, spins stay zero, and the
   // rolling resistance never acts: tasks that differ only in eta run the same
   // trajectory (bit for bit, at one step) under different keys.

@@ -40,6 +40,13 @@ TEST(Cli, ValidatePrintsCountAndFirstTask) {
   const Result t = run_demcal({"validate", std::string(DEMCAL_EXAMPLES_DIR) + "/quickstart.json"}, d.path.string());
   EXPECT_NE(t.out.find("work: the shear is "), std::string::npos) << t.out;
   EXPECT_NE(t.out.find("the preparation adds"), std::string::npos) << t.out;
+  // Where each flat name goes in a job file: a material key is refused in the
+  // scene's section, and d_min is "diameter.min" in the material's.
+  EXPECT_NE(t.out.find("in a job file:\n  \"material\": {kn, ks, density, b, theta_deg, eta, diameter.min (d_min), "
+                       "diameter.max (d_max)}\n  \"triaxial\": {particles, packing, confining_kpa,"),
+            std::string::npos)
+      << t.out;
+  EXPECT_NE(t.out.find("\n  top level: seed\n"), std::string::npos) << t.out;
 }
 
 TEST(Cli, ValidateRejectsBadJobsNamingTheField) {
@@ -48,6 +55,11 @@ TEST(Cli, ValidateRejectsBadJobsNamingTheField) {
   Result r = run_demcal({"validate", "bad.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("collision.partcles"), std::string::npos) << r.err;
+  // A name without its unit is taken for it, not for the nearest typo ("eta").
+  write(d.file("theta.json"), R"({"name": "t", "scene": "triaxial", "material": {"theta": 30}})");
+  r = run_demcal({"validate", "theta.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("material.theta: unknown key (did you mean \"theta_deg\"?)"), std::string::npos) << r.err;
   write(d.file("unknown.json"), R"({"name": "u", "scene": "triaxal"})");
   r = run_demcal({"validate", "unknown.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);

@@ -510,7 +510,12 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   j = base;
   j["material"]["theta_deg"] = 0;
   j["grid"] = {{"eta", {0.0, 0.5}}};
-  EXPECT_NE(notes_of(j).find("task #1: material.eta exerts no moment at theta_deg 0"), std::string::npos) << notes_of(j);
+  EXPECT_NE(notes_of(j).find("task #0: material.theta_deg is 0 (the default when a job leaves it out): the grains are "
+                            "frictionless, and the test measures a frictionless packing's angles, not a sand's\n"),
+            std::string::npos)
+      << notes_of(j);
+  EXPECT_NE(notes_of(j).find("not a sand's; material.eta exerts no moment at theta_deg 0"), std::string::npos) << notes_of(j);
+  EXPECT_EQ(notes_of(base).find("theta_deg is 0"), std::string::npos) << notes_of(base);
   j = base;
   j["triaxial"]["dt_factor"] = 0.7;
   EXPECT_NE(notes_of(j).find("dt is 0.968 of the critical step of an isolated pair"), std::string::npos) << notes_of(j);
