@@ -5,7 +5,10 @@
 # and contour maps of phi_peak and phi_cv with that region drawn on them.
 #   PHI_PEAK=42 PHI_CV=30 scripts/quickstart.sh      # your own target angles [deg]
 #   JOB=examples/collision.json DB=my.db scripts/quickstart.sh
+# JOB and DB are read from where the script is started (JOB also from the clone, for
+# its examples/); the database, its results and the maps go next to DB.
 set -euo pipefail
+caller=$PWD
 cd "$(dirname "$0")/.."
 BUILD_DIR=${BUILD_DIR:-build}
 # The command-line tool only (the tests and benchmarks are scripts/test.sh's), its
@@ -15,9 +18,12 @@ BUILD_DIR="$BUILD_DIR" BUILD_TARGETS=${BUILD_TARGETS:-demcal} BUILD_LOG=${BUILD_
   bash scripts/setup.sh
 JOB=${JOB:-examples/quickstart.json}
 DB=${DB:-demcal.db}
+case "$JOB" in /*) ;; *) if [ -e "$caller/$JOB" ]; then JOB="$caller/$JOB"; fi ;; esac
+case "$DB" in /*) ;; *) DB="$caller/$DB" ;; esac
 PHI_PEAK=${PHI_PEAK:-40}
 PHI_CV=${PHI_CV:-27}
 demcal="$BUILD_DIR/cli/demcal"
+case "$demcal" in /*) ;; *) demcal="$PWD/$demcal" ;; esac  # printed for use from anywhere
 summary=$("$demcal" validate "$JOB")
 echo "$summary" | head -n 2
 # The job's name and scene as demcal read them ("job NAME: scene SCENE, fidelity F"),
@@ -48,7 +54,10 @@ fi
   --metrics phi_peak_deg,phi_cv_deg,phi_diff_deg,porosity_interior_initial,eps_v_final,max_inertial_number,wall_s
 echo
 echo "== inversion: which (theta, eta) give phi_peak = $PHI_PEAK deg and phi_cv = $PHI_CV deg? =="
-"$demcal" fit --db "$DB" --job "$name" --target "phi_peak=$PHI_PEAK" --target "phi_cv=$PHI_CV"
+# A refused fit (targets out of the grid's reach, too few values on an axis) still
+# gets its maps, and its exit status is the script's.
+fit_rc=0
+"$demcal" fit --db "$DB" --job "$name" --target "phi_peak=$PHI_PEAK" --target "phi_cv=$PHI_CV" || fit_rc=$?
 echo
 echo "== maps (the fit's 95% region drawn on them) =="
 for metric in phi_peak phi_cv; do
@@ -59,3 +68,4 @@ echo "Stress-strain series (HDF5) are under $out/demcal-out/$name/; plot one tas
 echo "  $demcal plot $first --db $DB --series triaxial --x eps1 --y phi_mob_deg --out phi_mob.png"
 echo "This grid is the 'quick' preset (400 grains): a smoke test, ±2-3 deg. For a real"
 echo "calibration use \"fidelity\": \"standard\" (README, 'Scenes') and a grid around the answer."
+exit "$fit_rc"
