@@ -197,8 +197,16 @@ std::vector<std::string> base_jobs(db::Store& store) {
   return out;
 }
 
-ResponseSurface gather(db::Store& store, const std::string& job, const std::string& metric,
-                       const GatherOptions& opt) {
+namespace {
+
+// A task's result, and whether it comes from a refinement round.
+struct Row {
+  jobs::ResultRow r;
+  bool refine;
+};
+
+// The job's tasks (and its refinement rounds', if asked) that the filters select.
+std::vector<Row> read_rows(db::Store& store, const std::string& job, const GatherOptions& opt) {
   if (!store.find_job(job)) {
     const auto all = base_jobs(store);
     throw JobError("--job", "no job named \"" + job + "\"" +
@@ -208,20 +216,6 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     if (w.key == "theta_deg" || w.key == "eta")
       throw JobError("--where", w.key + " is an axis of the surface (theta_deg and eta are what a map draws and a fit "
                                 "finds); --where pins the other parameters");
-  ResponseSurface rs;
-  rs.job = job;
-  rs.metric = metric;
-  const MetricSpec spec = metric_spec(metric);
-  rs.label = spec.label;
-  // What is read from the store: phi_diff and phi_diff_deg are phi_peak_deg - phi_cv_deg.
-  const auto [plus, minus] = stored_reading(metric);
-  const bool uses_cv = plus.rfind("phi_cv", 0) == 0 || minus.rfind("phi_cv", 0) == 0;
-  const bool uses_peak = plus == "phi_peak_deg" || minus == "phi_peak_deg";
-
-  struct Row {
-    jobs::ResultRow r;
-    bool refine;
-  };
   std::vector<Row> rows;
   std::string why_none;  // the filter that matched nothing, and the values its key takes
   for (auto& r : jobs::select_rows(store, job, opt.where, &why_none)) rows.push_back({std::move(r), false});
@@ -232,9 +226,13 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     throw JobError(opt.where.empty() ? "--job" : "--where",
                    "no data: job \"" + job + "\" has no tasks" +
                        (opt.where.empty() ? "" : " matching the filters" + (why_none.empty() ? "" : ": " + why_none)));
+  return rows;
+}
 
-  // A stored metric nobody has is an unknown metric, not missing data. Nobody: no task
-  // of the job, filtered or not (the filters may select only tasks that lack it).
+// A stored metric nobody has is an unknown metric, not missing data. Nobody: no task
+// of the job, filtered or not (the filters may select only tasks that lack it).
+void require_known_metric(db::Store& store, const std::string& job, const std::string& metric,
+                          const GatherOptions& opt, const std::vector<Row>& rows) {
   std::set<std::string> stored;
   for (const auto& row : rows)
     for (const auto& m : row.r.metrics) stored.insert(m.first);
@@ -248,43 +246,45 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
                                                                         join(std::vector<std::string>(stored.begin(), stored.end()))) +
                                   ")");
   }
+}
 
-  // No task holding the metric is the first thing to say: asking to pin a parameter
-  // first would only lead to this message one command later. (Past this check some
-  // grid point has a value, so the surface below is never empty.)
-  if (std::none_of(rows.begin(), rows.end(), [&](const Row& row) {
+// No task holding the metric is the first thing to say: asking to pin a parameter
+// first would only lead to this message one command later. (Past this check some
+// grid point has a value, so the surface is never empty.)
+void require_some_value(const std::string& job, const MetricSpec& spec, const GatherOptions& opt,
+                        const std::vector<Row>& rows) {
+  if (std::any_of(rows.begin(), rows.end(), [&](const Row& row) {
         return row.r.task.status == "done" && metric_value(spec, row.r.metrics).has_value();
-      })) {
-    int done = 0, failed = 0;
-    for (const auto& row : rows) {
-      done += row.r.task.status == "done";
-      failed += row.r.task.status == "failed";
-    }
-    const int unfinished = static_cast<int>(rows.size()) - done - failed;
-    // Finished tasks without the metric: the metric is not this job's (a repose angle
-    // asked of a triaxial job). None finished: the job has nothing yet.
-    throw JobError(done > 0 ? opt.field : "--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
-                                (opt.where.empty() ? "" : " selected") + " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
-                                " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
-                                std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
+      }))
+    return;
+  int done = 0, failed = 0;
+  for (const auto& row : rows) {
+    done += row.r.task.status == "done";
+    failed += row.r.task.status == "failed";
   }
+  const int unfinished = static_cast<int>(rows.size()) - done - failed;
+  // Finished tasks without the metric: the metric is not this job's (a repose angle
+  // asked of a triaxial job). None finished: the job has nothing yet.
+  throw JobError(done > 0 ? opt.field : "--job", "no data: none of job \"" + job + "\"'s " + std::to_string(rows.size()) +
+                              (opt.where.empty() ? "" : " selected") + " tasks has a stored " + (spec.minus.empty() ? spec.plus : spec.plus + " and " + spec.minus) +
+                              " (" + std::to_string(done) + " done, " + std::to_string(failed) + " failed, " +
+                              std::to_string(unfinished) + " not finished; scene " + rows.front().r.task.scene + ")");
+}
 
-  // A job without a (theta, eta) grid cannot be mapped or fitted whatever is pinned:
-  // say that before asking to pin anything.
-  {
-    std::set<std::string> th, et;
-    for (const auto& row : rows) {
-      if (row.r.params.contains("theta_deg")) th.insert(row.r.params["theta_deg"].dump());
-      if (row.r.params.contains("eta")) et.insert(row.r.params["eta"].dump());
-    }
-    if (th.size() < 2 || et.size() < 2)
-      throw JobError("--job", "job \"" + job + "\" (scene " + rows.front().r.task.scene +
-                                  ") is not a (theta, eta) grid: it has " + std::to_string(th.size()) +
-                                  " theta_deg and " + std::to_string(et.size()) +
-                                  " eta value(s); maps need at least 2 of each, fits 3");
+// A job without a (theta, eta) grid cannot be mapped or fitted whatever is pinned (said
+// before asking to pin anything); and only replicas may be averaged: any other
+// parameter that varies must be pinned.
+void require_one_grid(const std::string& job, const std::vector<Row>& rows) {
+  std::set<std::string> th, et;
+  for (const auto& row : rows) {
+    if (row.r.params.contains("theta_deg")) th.insert(row.r.params["theta_deg"].dump());
+    if (row.r.params.contains("eta")) et.insert(row.r.params["eta"].dump());
   }
-
-  // Only replicas may be averaged: any other parameter that varies must be pinned.
+  if (th.size() < 2 || et.size() < 2)
+    throw JobError("--job", "job \"" + job + "\" (scene " + rows.front().r.task.scene +
+                                ") is not a (theta, eta) grid: it has " + std::to_string(th.size()) +
+                                " theta_deg and " + std::to_string(et.size()) +
+                                " eta value(s); maps need at least 2 of each, fits 3");
   std::map<std::string, std::set<std::string>> seen;
   for (const auto& row : rows)
     for (const auto& [k, v] : row.r.params.items())
@@ -293,18 +293,27 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
     if (vals.size() > 1)
       throw JobError("--where", "job \"" + job + "\" varies " + k + " (" + join(std::vector<std::string>(vals.begin(), vals.end())) +
                                     ") besides theta_deg and eta; pick one with --where " + k + "=VALUE");
+}
 
-  std::map<std::pair<long long, long long>, std::size_t> index;  // rounded (theta, eta) -> point
-  std::set<double> thetas, etas;
+using NodeKey = std::pair<long long, long long>;  // (theta, eta) rounded to 1e-9
+NodeKey node_key(double th, double et) { return std::make_pair(std::llround(th * 1e9), std::llround(et * 1e9)); }
+
+// Each row into its grid point: its value, or why it has none (failed, unfinished,
+// done without the metric), and the warnings it carries. The grid's axes (of the
+// non-refinement rows) into `thetas` and `etas`; `index` maps a node to its point.
+void add_rows(ResponseSurface& rs, const std::string& job, const std::vector<Row>& rows, const MetricSpec& spec,
+              std::map<NodeKey, std::size_t>& index, std::set<double>& thetas, std::set<double>& etas) {
+  const auto [plus, minus] = stored_reading(rs.metric);
+  const bool uses_cv = plus.rfind("phi_cv", 0) == 0 || minus.rfind("phi_cv", 0) == 0;
+  const bool uses_peak = plus == "phi_peak_deg" || minus == "phi_peak_deg";
   for (const auto& row : rows) {
     double th = 0, et = 0;
     if (!number_of(row.r.params, "theta_deg", th) || !number_of(row.r.params, "eta", et))
       throw JobError("--job", "job \"" + job + "\" has tasks without theta_deg and eta parameters (scene " +
                                   row.r.task.scene + "); calibration needs a grid over both");
-    const auto key = std::make_pair(std::llround(th * 1e9), std::llround(et * 1e9));
-    auto it = index.find(key);
+    auto it = index.find(node_key(th, et));
     if (it == index.end()) {
-      it = index.emplace(key, rs.points.size()).first;
+      it = index.emplace(node_key(th, et), rs.points.size()).first;
       GridPoint p;
       p.theta = th;
       p.eta = et;
@@ -339,11 +348,29 @@ ResponseSurface gather(db::Store& store, const std::string& job, const std::stri
       ++p.unfinished;
     }
   }
+}
+
+}  // namespace
+
+ResponseSurface gather(db::Store& store, const std::string& job, const std::string& metric,
+                       const GatherOptions& opt) {
+  const std::vector<Row> rows = read_rows(store, job, opt);
+  ResponseSurface rs;
+  rs.job = job;
+  rs.metric = metric;
+  const MetricSpec spec = metric_spec(metric);
+  rs.label = spec.label;
+  require_known_metric(store, job, metric, opt, rows);
+  require_some_value(job, spec, opt, rows);
+  require_one_grid(job, rows);
+  std::map<NodeKey, std::size_t> index;
+  std::set<double> thetas, etas;
+  add_rows(rs, job, rows, spec, index, thetas, etas);
   // Nodes of the grid no task of this database stands on (the grid is the product of
   // its axes): holes, as the map draws them, not points silently left out.
   for (double th : thetas)
     for (double et : etas)
-      if (!index.count(std::make_pair(std::llround(th * 1e9), std::llround(et * 1e9)))) {
+      if (!index.count(node_key(th, et))) {
         GridPoint p;
         p.theta = th;
         p.eta = et;
