@@ -220,13 +220,13 @@ std::string material_mismatch(db::Store& store, const std::vector<std::string>& 
          "): the fit takes their metrics as one material's; rerun one job with the other's material section";
 }
 
-Calibration calibrate(db::Store& store, const FitRequest& req) {
-  if (req.targets.empty()) throw JobError("--target", "give at least one target, e.g. --target phi_peak=41.4");
-  refuse_redundant(req.targets);
-  Calibration cal;
+namespace {
+
+// One model per target, on the job storing its metric; returns the box where every
+// surrogate has data (failed edge rows cut it), with a warning for each cut.
+Box build_models(db::Store& store, const FitRequest& req, Calibration& cal, std::vector<std::string>& warnings) {
   Box box;
   bool first = true;
-  std::vector<std::string> data_cuts;
   for (const auto& t : req.targets) {
     const std::string job = job_for_metric(store, t.metric, req.jobs, req.where);
     GatherOptions go;
@@ -248,7 +248,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     // The surrogate is trusted where its points are: failed edge rows cut the box.
     const Box b = rs.data_box();
     if (const std::string cut = box_cut(rs.box(), b); !cut.empty())
-      data_cuts.push_back("job " + job + " has no " + t.metric + " " + cut + ": the fit searches only where there is data");
+      warnings.push_back("job " + job + " has no " + t.metric + " " + cut + ": the fit searches only where there is data");
     if (first) {
       box = b;
       first = false;
@@ -267,42 +267,56 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
     throw JobError("--job", "the grids of jobs " + join(std::vector<std::string>(js.begin(), js.end())) +
                                 " do not overlap in (theta, eta)");
   }
+  return box;
+}
+
+// The replica correlation of every pair of targets on one job.
+std::vector<PairCorrelation> replica_correlations(const Calibration& cal) {
   std::vector<PairCorrelation> correlations;
   for (std::size_t k = 0; k < cal.surfaces.size(); ++k)
     for (std::size_t l = k + 1; l < cal.surfaces.size(); ++l)
       if (cal.surfaces[k].job == cal.surfaces[l].job)
         correlations.push_back({k, l, replica_correlation(cal.surfaces[k], cal.surfaces[l])});
-  cal.result = invert(cal.models, req.targets, box, req.options, correlations);
-  for (const auto& c : data_cuts) cal.result.warnings.push_back(c);
-  {
-    std::set<std::string> used;
-    for (const auto& m : cal.models) used.insert(m.job);
-    if (const std::string w = material_mismatch(store, {used.begin(), used.end()}); !w.empty())
-      cal.result.warnings.push_back(w);
-    for (const auto& j : req.jobs)
-      if (!used.count(j))
-        cal.result.warnings.push_back("job " + j + " (--job) stores none of the targets' metrics: the fit does not use it");
+  return correlations;
+}
+
+// Jobs fitted together on different materials, and --job's that hold no target.
+void warn_about_jobs(db::Store& store, const FitRequest& req, Calibration& cal) {
+  std::set<std::string> used;
+  for (const auto& m : cal.models) used.insert(m.job);
+  if (const std::string w = material_mismatch(store, {used.begin(), used.end()}); !w.empty())
+    cal.result.warnings.push_back(w);
+  for (const auto& j : req.jobs)
+    if (!used.count(j))
+      cal.result.warnings.push_back("job " + j + " (--job) stores none of the targets' metrics: the fit does not use it");
+}
+
+// Holes under the 95% region, one warning per set of gaps: metrics of one job share
+// their failed tasks.
+void warn_about_gaps(Calibration& cal) {
+  if (!cal.result.ok) return;
+  std::vector<std::pair<std::string, std::string>> gaps;  // gaps, metrics
+  for (std::size_t k = 0; k < cal.surfaces.size(); ++k) {
+    const std::string g = gaps_under(cal.surfaces[k], cal.result);
+    if (g.empty()) continue;
+    auto it = std::find_if(gaps.begin(), gaps.end(), [&](const auto& e) { return e.first == g; });
+    if (it == gaps.end())
+      gaps.emplace_back(g, cal.models[k].metric);
+    else
+      it->second += " and " + cal.models[k].metric;
   }
-  if (cal.result.ok) {
-    // One warning per set of gaps: metrics of one job share their failed tasks.
-    std::vector<std::pair<std::string, std::string>> gaps;  // gaps, metrics
-    for (std::size_t k = 0; k < cal.surfaces.size(); ++k) {
-      const std::string g = gaps_under(cal.surfaces[k], cal.result);
-      if (g.empty()) continue;
-      auto it = std::find_if(gaps.begin(), gaps.end(), [&](const auto& e) { return e.first == g; });
-      if (it == gaps.end())
-        gaps.emplace_back(g, cal.models[k].metric);
-      else
-        it->second += " and " + cal.models[k].metric;
-    }
-    for (const auto& [g, metrics] : gaps)
-      cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics +
-                                    (metrics.find(" and ") == std::string::npos ? " has" : " have") +
-                                    " no value at a corner (" + g +
-                                    "): the surrogate bridges the gap there; finish unfinished tasks (demcal run), "
-                                    "merge or run missing ones, and change the settings of failed or invalid ones "
-                                    "(a rerun repeats them, unless a worker was killed)");
-  }
+  for (const auto& [g, metrics] : gaps)
+    cal.result.warnings.push_back("the 95% region lies on grid cells where " + metrics +
+                                  (metrics.find(" and ") == std::string::npos ? " has" : " have") +
+                                  " no value at a corner (" + g +
+                                  "): the surrogate bridges the gap there; finish unfinished tasks (demcal run), "
+                                  "merge or run missing ones, and change the settings of failed or invalid ones "
+                                  "(a rerun repeats them, unless a worker was killed)");
+}
+
+// What the surrogates stand on: points short of replicas, windows not at critical
+// state, peaks on a spike, and results carrying warnings.
+void warn_about_results(db::Store& store, Calibration& cal) {
   // A point that lost a replica averages the others: with replicas that differ
   // systematically (another packing) its mean moves by their spread, and nothing in
   // the numbers shows it. Once a job: its metrics share the tasks.
@@ -313,7 +327,7 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     " have a value from fewer replicas than they have tasks (" + rs.partial_list() +
                                     "): their means rest on the replicas that finished, and may be biased; demcal "
                                     "status shows why tasks failed, demcal run finishes unfinished ones");
-  // The surrogates stand on these results: say when they carry warnings, once a job.
+  // Said once a job, from the surface with the most warned results.
   std::map<std::string, const ResponseSurface*> warned;
   for (const auto& rs : cal.surfaces)
     if (rs.warned > 0 && (!warned.count(rs.job) || rs.warned > warned[rs.job]->warned)) warned[rs.job] = &rs;
@@ -331,6 +345,21 @@ Calibration calibrate(db::Store& store, const FitRequest& req) {
                                     "peak strength; a target on phi_peak_smoothed_deg fits the peak of the running "
                                     "mean instead");
   for (const auto& [job, rs] : warned) cal.result.warnings.push_back(rs->warned_note(jobs::query_hint(store.path(), job)));
+}
+
+}  // namespace
+
+Calibration calibrate(db::Store& store, const FitRequest& req) {
+  if (req.targets.empty()) throw JobError("--target", "give at least one target, e.g. --target phi_peak=41.4");
+  refuse_redundant(req.targets);
+  Calibration cal;
+  std::vector<std::string> data_cuts;
+  const Box box = build_models(store, req, cal, data_cuts);
+  cal.result = invert(cal.models, req.targets, box, req.options, replica_correlations(cal));
+  for (const auto& c : data_cuts) cal.result.warnings.push_back(c);
+  warn_about_jobs(store, req, cal);
+  warn_about_gaps(cal);
+  warn_about_results(store, cal);
   return cal;
 }
 
