@@ -103,70 +103,17 @@ int fidelity(const StudyArgs& a, const calibrate::StudyOptions& o) {
   return kOk;
 }
 
-int study(const StudyArgs& a) {
-  const auto& names = calibrate::study_names();
-  if (std::find(names.begin(), names.end(), a.name) == names.end()) {
-    std::string all;
-    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
-    throw jobs::JobError("study", "unknown study \"" + a.name + "\" (expected one of: " + all + ")");
-  }
-  calibrate::StudyOptions o;
-  o.out_dir = a.out.empty() ? default_out_dir(a.db) + "/study-" + a.name : a.out;
-  o.quick = a.quick;
-  o.workers = a.workers;
-  o.tolerance = a.tolerance;
-  o.replicas = a.replicas;
-  o.knobs = a.knobs;
-  o.smoothed_peak = a.peak == "smoothed";
-  o.terminal = isatty(STDERR_FILENO) != 0;
-  o.log = &std::cerr;
-  if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
-    throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
-  if (a.name != "fidelity" && a.peak_given)
-    throw jobs::JobError("--peak", "study " + a.name + " has no peak strength to judge: --peak applies to the (triaxial) "
-                                   "fidelity study only");
-  if (a.name == "grazing" && a.tolerance > 0)
-    throw jobs::JobError("--tolerance", "the grazing study has no tolerance: any energy gained is reported");
-  if (a.name == "grazing" && a.db_given)
-    throw jobs::JobError("--db", "the grazing study stores nothing in a database: its CSV and charts go to --out");
-  if (is_fidelity(a.name)) {
-    for (const auto& r : a.references)
-      if (!o.reference.insert(parse_reference(r)).second)
-        throw jobs::JobError("--reference", "\"" + r + "\": a second reference for the same knob; give one");
-    calibrate::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
-  }
-  if (!jobs::gnuplot_on_path())
-    throw std::runtime_error("study " + a.name + " draws its charts with gnuplot, which is not on PATH: install it "
-                             "(apt-get install gnuplot-nox; scripts/setup.sh does) and run the study again; nothing was run");
-  // The option whose path the output folder comes from (grazing has no database).
-  const std::string flag = a.name != "grazing" ? out_flag(a.out) : "--out";
-  // The database checked first (nothing made yet when it is refused), then the
-  // output folder made and locked, then its sub-folders made, all before the database
-  // is: a file or a link in their way would otherwise stop the study after it had
-  // recorded its jobs, and a study refused by the lock leaves nothing of its own.
-  if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
-  require_writable_dir(flag, o.out_dir);
-  jobs::make_folder(o.out_dir, flag, "folder");
-  // Held until the study returns: its charts' data and scripts have fixed names.
-  const jobs::FolderLock lock(o.out_dir, flag);
-  if (!lock.unsupported().empty())
-    std::cerr << "demcal: warning: " << flag << ": " << o.out_dir << " cannot be locked (" << lock.unsupported()
-              << "): a second study into it at the same time would not be stopped\n";
-  for (const char* sub : {"tasks", "jobs"}) {
-    if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
-      continue;
-    jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
-  }
-  if (is_fidelity(a.name)) return fidelity(a, o);
-  if (a.name == "grazing") {
-    const calibrate::GrazingStudy s = calibrate::run_grazing_study(o);
-    std::cout << "grazing impact, theta 30 deg, eta 0.1, b 1, no damping: " << s.rows.size() << " impacts\n"
-              << "largest energy ratio - 1: " << s.worst_gain << " (" << s.worst_where << ")"
-              << (s.worst_gain > 0 ? ": the integrator's head-on error, see docs/studies.md" : ": no energy gained")
-              << "\n";
-    for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
-    return kOk;
-  }
+int grazing(const calibrate::StudyOptions& o) {
+  const calibrate::GrazingStudy s = calibrate::run_grazing_study(o);
+  std::cout << "grazing impact, theta 30 deg, eta 0.1, b 1, no damping: " << s.rows.size() << " impacts\n"
+            << "largest energy ratio - 1: " << s.worst_gain << " (" << s.worst_where << ")"
+            << (s.worst_gain > 0 ? ": the integrator's head-on error, see docs/studies.md" : ": no energy gained")
+            << "\n";
+  for (const auto& f : s.files) std::cout << "wrote " << f << "\n";
+  return kOk;
+}
+
+int timestep(const StudyArgs& a, const calibrate::StudyOptions& o) {
   db::Store store(a.db);
   const calibrate::TimestepStudy s = calibrate::run_timestep_study(store, o);
   std::cout << "job " << s.job << " in " << a.db << ": " << s.tasks << " tasks (" << s.reused << " reused, " << s.ran
@@ -213,6 +160,72 @@ int study(const StudyArgs& a) {
     return kRuntime;
   }
   return kOk;
+}
+
+// The study's options from the command line, refusing those that do not apply to it
+// (bad input: exit 2 before anything is written).
+calibrate::StudyOptions study_options(const StudyArgs& a) {
+  const auto& names = calibrate::study_names();
+  if (std::find(names.begin(), names.end(), a.name) == names.end()) {
+    std::string all;
+    for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
+    throw jobs::JobError("study", "unknown study \"" + a.name + "\" (expected one of: " + all + ")");
+  }
+  calibrate::StudyOptions o;
+  o.out_dir = a.out.empty() ? default_out_dir(a.db) + "/study-" + a.name : a.out;
+  o.quick = a.quick;
+  o.workers = a.workers;
+  o.tolerance = a.tolerance;
+  o.replicas = a.replicas;
+  o.knobs = a.knobs;
+  o.smoothed_peak = a.peak == "smoothed";
+  o.terminal = isatty(STDERR_FILENO) != 0;
+  o.log = &std::cerr;
+  if (!is_fidelity(a.name) && (a.replicas > 0 || !a.knobs.empty() || !a.references.empty()))
+    throw jobs::JobError("study", "--replicas, --knobs and --reference apply to the fidelity and repose-fidelity studies only");
+  if (a.name != "fidelity" && a.peak_given)
+    throw jobs::JobError("--peak", "study " + a.name + " has no peak strength to judge: --peak applies to the (triaxial) "
+                                   "fidelity study only");
+  if (a.name == "grazing" && a.tolerance > 0)
+    throw jobs::JobError("--tolerance", "the grazing study has no tolerance: any energy gained is reported");
+  if (a.name == "grazing" && a.db_given)
+    throw jobs::JobError("--db", "the grazing study stores nothing in a database: its CSV and charts go to --out");
+  if (is_fidelity(a.name)) {
+    for (const auto& r : a.references)
+      if (!o.reference.insert(parse_reference(r)).second)
+        throw jobs::JobError("--reference", "\"" + r + "\": a second reference for the same knob; give one");
+    calibrate::check_fidelity_options(a.name, o);  // bad knobs: exit 2 before anything is written
+  }
+  return o;
+}
+
+int study(const StudyArgs& a) {
+  const calibrate::StudyOptions o = study_options(a);
+  if (!jobs::gnuplot_on_path())
+    throw std::runtime_error("study " + a.name + " draws its charts with gnuplot, which is not on PATH: install it "
+                             "(apt-get install gnuplot-nox; scripts/setup.sh does) and run the study again; nothing was run");
+  // The option whose path the output folder comes from (grazing has no database).
+  const std::string flag = a.name != "grazing" ? out_flag(a.out) : "--out";
+  // The database checked first (nothing made yet when it is refused), then the
+  // output folder made and locked, then its sub-folders made, all before the database
+  // is: a file or a link in their way would otherwise stop the study after it had
+  // recorded its jobs, and a study refused by the lock leaves nothing of its own.
+  if (a.name != "grazing") db::check_file(a.db), db::check_writable(a.db);
+  require_writable_dir(flag, o.out_dir);
+  jobs::make_folder(o.out_dir, flag, "folder");
+  // Held until the study returns: its charts' data and scripts have fixed names.
+  const jobs::FolderLock lock(o.out_dir, flag);
+  if (!lock.unsupported().empty())
+    std::cerr << "demcal: warning: " << flag << ": " << o.out_dir << " cannot be locked (" << lock.unsupported()
+              << "): a second study into it at the same time would not be stopped\n";
+  for (const char* sub : {"tasks", "jobs"}) {
+    if ((!is_fidelity(a.name) && std::string(sub) == "jobs") || (a.name == "grazing" && std::string(sub) == "tasks"))
+      continue;
+    jobs::make_folder((fs::path(o.out_dir) / sub).string(), flag, "folder");
+  }
+  if (is_fidelity(a.name)) return fidelity(a, o);
+  if (a.name == "grazing") return grazing(o);
+  return timestep(a, o);
 }
 
 }  // namespace
