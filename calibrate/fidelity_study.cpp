@@ -229,6 +229,109 @@ std::string short_metric(const std::string& m) {
   return m;
 }
 
+// The chart's data in four blocks: 0 settings with an error (wall, then error and sd
+// per metric, label), 1 Pareto front by wall time, 2 failed settings (drawn at
+// `ceiling`, at `wmin` without a wall time), 3 the recommended setting.
+void write_chart_data(const FidelityStudy& s, const FidelityKnob& k, const fs::path& data, double wmin, double ceiling) {
+  std::ofstream f(data);
+  f.precision(8);
+  const auto quoted = [](const FidelityPoint& p) {
+    return "\"" + p.label + (p.reference ? " (ref)" : "") + (p.failed > 0 && p.failed < p.replicas ? " (" +
+           std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed)" : "") +
+           (p.spikes.empty() ? "" : " (" + std::to_string(p.spikes.size()) + "/" + std::to_string(p.replicas) +
+            " peak on a spike)") + "\"";
+  };
+  f << "# block 0: wall_s, per metric error and replica sd, label\n";
+  int n = 0;
+  for (const auto& p : k.points) {
+    if (!std::isfinite(p.score)) continue;
+    f << p.wall_s;
+    for (std::size_t m = 0; m < s.metrics.size(); ++m) f << " " << p.error[m] << " " << p.sd[m];
+    f << " " << quoted(p) << "\n";
+    ++n;
+  }
+  if (n == 0) {
+    f << "nan";
+    for (std::size_t m = 0; m < s.metrics.size(); ++m) f << " nan nan";
+    f << " \"\"\n";
+  }
+  f << "\n\n# block 1: Pareto front (wall_s, max error + sd)\n";
+  std::vector<FidelityPoint> front;
+  for (const auto& p : k.points)
+    if (p.pareto) front.push_back(p);
+  std::sort(front.begin(), front.end(), [](auto& a, auto& b) { return a.wall_s < b.wall_s; });
+  for (const auto& p : front) f << p.wall_s << " " << p.score << "\n";
+  if (front.empty()) f << "nan nan\n";
+  f << "\n\n# block 2: failed settings (every replica failed, or no reference)\n";
+  n = 0;
+  for (const auto& p : k.points) {
+    if (std::isfinite(p.score)) continue;
+    f << (std::isfinite(p.wall_s) && p.wall_s > 0 ? p.wall_s : wmin) << " " << ceiling << " \"" << p.label
+      << (p.reference ? " (ref)" : "") << ": "
+      << (p.failed > 0 ? std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed" : "no error (reference failed)")
+      << "\"\n";
+    ++n;
+  }
+  if (n == 0) f << "nan nan \"\"\n";
+  f << "\n\n# block 3: recommended\n";
+  n = 0;
+  for (const auto& p : k.points)
+    if (p.recommended) {
+      f << p.wall_s << " " << p.score << "\n";
+      ++n;
+    }
+  if (n == 0) f << "nan nan\n";
+}
+
+// The chart's gnuplot script: errors with replica bars against wall time (log axis,
+// [wmin, wmax]), the tolerance, the Pareto front, the recommended and failed settings.
+void write_chart_script(const FidelityStudy& s, const FidelityKnob& k, const fs::path& data, const fs::path& script,
+                        const std::string& part, double wmin, double wmax, double ceiling) {
+  const std::string dq = gnuplot_quoted(data.string());
+  const int label_col = 2 + 2 * static_cast<int>(s.metrics.size());
+  std::ofstream g(script);
+  g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(part) << "\n"
+    << "set title " << gnuplot_quoted("demcal study " + s.name + (s.smoothed_peak ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
+                                      std::to_string(s.replicas) + (s.replicas == 1 ? " replica" : " replicas") + " per setting)") << " noenhanced\n"
+    << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
+    << "set ylabel '|metric - reference| [deg]; bars: replica standard deviation' noenhanced\n"
+    << "set logscale x\nset grid\nset key below box noenhanced\n"
+    << "set xrange [" << wmin / 1.6 << ":" << wmax * 1.6 << "]\nset yrange [" << -0.05 * ceiling << ":" << ceiling * 1.12 << "]\n"
+    << "set arrow 1 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
+    << " nohead dt 3 lw 2 lc rgb '#2ca02c'\n"
+    << "set label 1 'tolerance " << fmt(s.tolerance) << " deg' at graph 0.01, first " << s.tolerance
+    << " offset 0,0.7 tc rgb '#2ca02c'\n"
+    ;
+  if (std::any_of(k.points.begin(), k.points.end(), [](const FidelityPoint& p) { return !std::isfinite(p.score); }))
+    g << "set arrow 2 from graph 0, first " << ceiling << " to graph 1, first " << ceiling
+      << " nohead dt 2 lc rgb '#b00000'\n";
+  // Log axis over often less than a decade: label 1-2-5 steps, not only decades.
+  g << "set xtics (";
+  bool first_tic = true;
+  for (double dec = std::pow(10.0, std::floor(std::log10(wmin / 1.6))); dec <= wmax * 1.6; dec *= 10.0)
+    for (double m : {1.0, 2.0, 5.0})
+      if (m * dec >= wmin / 1.6 && m * dec <= wmax * 1.6) {
+        g << (first_tic ? "" : ", ") << "'" << fmt(m * dec) << "' " << m * dec;
+        first_tic = false;
+      }
+  g << ")\n";
+  const char* colours[] = {"#1f77b4", "#d62728", "#9467bd"};
+  const int pts[] = {7, 5, 9};
+  g << "plot ";
+  for (std::size_t m = 0; m < s.metrics.size(); ++m) {
+    const double off = s.metrics.size() > 1 ? (m == 0 ? 0.97 : 1.03) : 1.0;  // keep the bars apart
+    g << (m ? ", " : "") << dq << " index 0 using ($1*" << off << "):" << 2 + 2 * m << ":" << 3 + 2 * m
+      << " with yerrorbars pt " << pts[m % 3] << " ps 1.4 lc rgb '" << colours[m % 3] << "' title "
+      << gnuplot_quoted("error in " + short_metric(s.metrics[m]));
+  }
+  g << ", " << dq << " index 0 using 1:2:" << label_col << " with labels offset 0,1.3 font ',9' notitle"
+    << ", " << dq << " index 1 using 1:2 with linespoints dt 2 lw 2 pt 6 ps 2.2 lc rgb '#555555' title "
+    << "'Pareto front (particle-steps, max error + sd)'"
+    << ", " << dq << " index 3 using 1:2 with points pt 12 ps 3.5 lw 2 lc rgb '#2ca02c' title 'recommended'"
+    << ", " << dq << " index 2 using 1:2 with points pt 2 ps 2.5 lw 2 lc rgb '#b00000' title 'failed (drawn at the top)'"
+    << ", " << dq << " index 2 using 1:2:3 with labels offset 0,-1.3 font ',9' tc rgb '#b00000' notitle\n";
+}
+
 void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::path& dir) {
   double wmin = 1e300, wmax = 0, top = s.tolerance * 1.5;
   for (const auto& p : k.points) {
@@ -243,104 +346,9 @@ void write_fidelity_chart(const FidelityStudy& s, FidelityKnob& k, const fs::pat
   const double ceiling = top * 1.15;  // failed points are drawn here
   const std::string stem = s.stem + "_" + k.name;
   const fs::path data = dir / (stem + ".dat"), script = dir / (stem + ".gp"), png = dir / (stem + ".png");
-  // Blocks: 0 settings with an error (wall, then error and sd per metric, label),
-  // 1 Pareto front by wall time, 2 failed settings, 3 the recommended setting.
-  {
-    std::ofstream f(data);
-    f.precision(8);
-    const auto quoted = [](const FidelityPoint& p) {
-      return "\"" + p.label + (p.reference ? " (ref)" : "") + (p.failed > 0 && p.failed < p.replicas ? " (" +
-             std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed)" : "") +
-             (p.spikes.empty() ? "" : " (" + std::to_string(p.spikes.size()) + "/" + std::to_string(p.replicas) +
-              " peak on a spike)") + "\"";
-    };
-    f << "# block 0: wall_s, per metric error and replica sd, label\n";
-    int n = 0;
-    for (const auto& p : k.points) {
-      if (!std::isfinite(p.score)) continue;
-      f << p.wall_s;
-      for (std::size_t m = 0; m < s.metrics.size(); ++m) f << " " << p.error[m] << " " << p.sd[m];
-      f << " " << quoted(p) << "\n";
-      ++n;
-    }
-    if (n == 0) {
-      f << "nan";
-      for (std::size_t m = 0; m < s.metrics.size(); ++m) f << " nan nan";
-      f << " \"\"\n";
-    }
-    f << "\n\n# block 1: Pareto front (wall_s, max error + sd)\n";
-    std::vector<FidelityPoint> front;
-    for (const auto& p : k.points)
-      if (p.pareto) front.push_back(p);
-    std::sort(front.begin(), front.end(), [](auto& a, auto& b) { return a.wall_s < b.wall_s; });
-    for (const auto& p : front) f << p.wall_s << " " << p.score << "\n";
-    if (front.empty()) f << "nan nan\n";
-    f << "\n\n# block 2: failed settings (every replica failed, or no reference)\n";
-    n = 0;
-    for (const auto& p : k.points) {
-      if (std::isfinite(p.score)) continue;
-      f << (std::isfinite(p.wall_s) && p.wall_s > 0 ? p.wall_s : wmin) << " " << ceiling << " \"" << p.label
-        << (p.reference ? " (ref)" : "") << ": "
-        << (p.failed > 0 ? std::to_string(p.failed) + "/" + std::to_string(p.replicas) + " failed" : "no error (reference failed)")
-        << "\"\n";
-      ++n;
-    }
-    if (n == 0) f << "nan nan \"\"\n";
-    f << "\n\n# block 3: recommended\n";
-    n = 0;
-    for (const auto& p : k.points)
-      if (p.recommended) {
-        f << p.wall_s << " " << p.score << "\n";
-        ++n;
-      }
-    if (n == 0) f << "nan nan\n";
-  }
-  const std::string dq = gnuplot_quoted(data.string());
-  const int label_col = 2 + 2 * static_cast<int>(s.metrics.size());
+  write_chart_data(s, k, data, wmin, ceiling);
   ImageFile image(png.string());
-  {
-    std::ofstream g(script);
-    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(image.part()) << "\n"
-      << "set title " << gnuplot_quoted("demcal study " + s.name + (s.smoothed_peak ? " --peak smoothed" : "") + ": " + k.what + " against wall time (" +
-                                        std::to_string(s.replicas) + (s.replicas == 1 ? " replica" : " replicas") + " per setting)") << " noenhanced\n"
-      << "set xlabel 'wall seconds per task (engine, one thread; mean over replicas)' noenhanced\n"
-      << "set ylabel '|metric - reference| [deg]; bars: replica standard deviation' noenhanced\n"
-      << "set logscale x\nset grid\nset key below box noenhanced\n"
-      << "set xrange [" << wmin / 1.6 << ":" << wmax * 1.6 << "]\nset yrange [" << -0.05 * ceiling << ":" << ceiling * 1.12 << "]\n"
-      << "set arrow 1 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
-      << " nohead dt 3 lw 2 lc rgb '#2ca02c'\n"
-      << "set label 1 'tolerance " << fmt(s.tolerance) << " deg' at graph 0.01, first " << s.tolerance
-      << " offset 0,0.7 tc rgb '#2ca02c'\n"
-      ;
-    if (std::any_of(k.points.begin(), k.points.end(), [](const FidelityPoint& p) { return !std::isfinite(p.score); }))
-      g << "set arrow 2 from graph 0, first " << ceiling << " to graph 1, first " << ceiling
-        << " nohead dt 2 lc rgb '#b00000'\n";
-    // Log axis over often less than a decade: label 1-2-5 steps, not only decades.
-    g << "set xtics (";
-    bool first_tic = true;
-    for (double dec = std::pow(10.0, std::floor(std::log10(wmin / 1.6))); dec <= wmax * 1.6; dec *= 10.0)
-      for (double m : {1.0, 2.0, 5.0})
-        if (m * dec >= wmin / 1.6 && m * dec <= wmax * 1.6) {
-          g << (first_tic ? "" : ", ") << "'" << fmt(m * dec) << "' " << m * dec;
-          first_tic = false;
-        }
-    g << ")\n";
-    const char* colours[] = {"#1f77b4", "#d62728", "#9467bd"};
-    const int pts[] = {7, 5, 9};
-    g << "plot ";
-    for (std::size_t m = 0; m < s.metrics.size(); ++m) {
-      const double off = s.metrics.size() > 1 ? (m == 0 ? 0.97 : 1.03) : 1.0;  // keep the bars apart
-      g << (m ? ", " : "") << dq << " index 0 using ($1*" << off << "):" << 2 + 2 * m << ":" << 3 + 2 * m
-        << " with yerrorbars pt " << pts[m % 3] << " ps 1.4 lc rgb '" << colours[m % 3] << "' title "
-        << gnuplot_quoted("error in " + short_metric(s.metrics[m]));
-    }
-    g << ", " << dq << " index 0 using 1:2:" << label_col << " with labels offset 0,1.3 font ',9' notitle"
-      << ", " << dq << " index 1 using 1:2 with linespoints dt 2 lw 2 pt 6 ps 2.2 lc rgb '#555555' title "
-      << "'Pareto front (particle-steps, max error + sd)'"
-      << ", " << dq << " index 3 using 1:2 with points pt 12 ps 3.5 lw 2 lc rgb '#2ca02c' title 'recommended'"
-      << ", " << dq << " index 2 using 1:2 with points pt 2 ps 2.5 lw 2 lc rgb '#b00000' title 'failed (drawn at the top)'"
-      << ", " << dq << " index 2 using 1:2:3 with labels offset 0,-1.3 font ',9' tc rgb '#b00000' notitle\n";
-  }
+  write_chart_script(s, k, data, script, image.part(), wmin, wmax, ceiling);
   run_gnuplot_script(script.string());
   image.commit();
   keep_script_redrawable(script.string(), dir.string(), {{image.part(), png.string()}});
