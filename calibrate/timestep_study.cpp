@@ -87,8 +87,99 @@ void mark_pareto(std::vector<TimestepPoint>& pts) {
   }
 }
 
-void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
+// One row per point: its status and failure, and nan for what a failed point lacks.
+void write_timestep_csv(const TimestepStudy& s, const fs::path& csv) {
+  WholeTextFile c(csv);
+  c << "series,dt_factor,dt,status,failure,drift_per_simulated_s,max_relative_error,wall_s_per_simulated_s,pareto,error,"
+       "replicas,drift_mean,drift_sd\n";
+  for (const auto& p : s.points) {
+    // A failed point has no drift, error or cost to give: nan, not a 0 that reads as exact.
+    const auto v = [&](double x) { return p.ok ? fmt(x, 6) : std::string("nan"); };
+    c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << v(p.dt) << ","
+      << timestep_status(p, s) << "," << (timestep_failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
+      << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
+      << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
+  }
+  c.commit();
+}
+
+// gnuplot data blocks: 0 frictionless ok, 1 friction ok, 2 frictionless failed (drawn
+// at `ceiling`), 3 friction failed, 4 frictionless Pareto (by cost), 5 friction Pareto.
+void write_timestep_data(const TimestepStudy& s, const fs::path& data, double ceiling) {
   const double floor_v = 1e-9;
+  std::ofstream d(data);
+  d.precision(8);
+  for (int block = 0; block < 6; ++block) {
+    const bool fric = block % 2 == 1;
+    std::vector<TimestepPoint> sel;
+    for (const auto& p : s.points) {
+      if (p.friction != fric) continue;
+      if (block < 2 && p.ok) sel.push_back(p);
+      if (block >= 2 && block < 4 && !p.ok) sel.push_back(p);
+      if (block >= 4 && p.pareto) sel.push_back(p);
+    }
+    if (block >= 4) std::sort(sel.begin(), sel.end(), [](auto& a, auto& b) { return a.cost < b.cost; });
+    d << "# block " << block << "\n";
+    for (const auto& p : sel)
+      d << p.dt_factor << " " << (p.ok ? std::max(floor_v, std::abs(p.drift)) : ceiling) << " " << p.cost << "\n";
+    if (sel.empty()) d << "nan nan nan\n";
+    d << "\n\n";
+  }
+}
+
+// Two charts: drift against the step factor (failure region from `first_fail`, the
+// critical factors, the tolerance, the recommendation), and drift against cost.
+void write_timestep_script(const TimestepStudy& s, const fs::path& data, const fs::path& script,
+                           const std::string& drift_part, const std::string& cost_part, double ceiling,
+                           double first_fail) {
+  const std::string dq = gnuplot_quoted(data.string());
+  std::ofstream g(script);
+  g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(drift_part) << "\n"
+    << "set title 'Collision test (seed Fig. 2.6): energy drift against the time-step factor' noenhanced\n"
+    << "set xlabel 'dt factor k  (dt = k sqrt(m_min / Kn))' noenhanced\n"
+    << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
+    << "set logscale xy\nset grid\nset key below box noenhanced\n"
+    << "set xrange [" << s.points.front().dt_factor * 0.8 << ":" << s.points.back().dt_factor * 1.25 << "]\n"
+    << "set yrange [*:" << ceiling * 3 << "]\n";
+  if (first_fail < 1e300)
+    g << "set object 1 rect from " << first_fail * 0.97 << ", graph 0 to graph 1, graph 1 fc rgb '#ffd8d8' "
+      << "fs solid 0.6 noborder behind\n"
+      << "set label 1 'failure region' at " << first_fail << ", graph 0.93 offset 1,0 tc rgb '#b00000'\n";
+  g << "set arrow 1 from " << s.critical_factor_frictionless << ", graph 0 to " << s.critical_factor_frictionless
+    << ", graph 1 nohead dt 2 lw 2 lc rgb '#1f77b4'\n"
+    << "set label 2 'critical, normal mode (" << fmt(s.critical_factor_frictionless) << ")' at "
+    << s.critical_factor_frictionless << ", graph 0.06 rotate by 90 offset -1,0 tc rgb '#1f77b4'\n"
+    << "set arrow 2 from " << s.critical_factor_full << ", graph 0 to " << s.critical_factor_full
+    << ", graph 1 nohead dt 2 lw 2 lc rgb '#d62728'\n"
+    << "set label 3 'critical, " << s.critical_mode_full << " (" << fmt(s.critical_factor_full) << ")' at "
+    << s.critical_factor_full << ", graph 0.06 rotate by 90 offset -1,0 tc rgb '#d62728' noenhanced\n"
+    << "set arrow 3 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
+    << " nohead dt 3 lc rgb '#2ca02c'\n"
+    << "set label 4 'tolerance " << fmt(s.tolerance) << "' at graph 0.02, first " << s.tolerance * 1.5
+    << " tc rgb '#2ca02c'\n";
+  if (s.recommended_factor > 0)
+    g << "set arrow 4 from " << s.recommended_factor << ", graph 0 to " << s.recommended_factor
+      << ", graph 0.8 nohead lw 2 lc rgb '#2ca02c'\n"
+      << "set label 5 'recommended k = " << fmt(s.recommended_factor) << "' at " << s.recommended_factor
+      << ", graph 0.82 center tc rgb '#2ca02c'\n";
+  g << "plot " << dq << " index 0 using 1:2 with linespoints pt 7 lc rgb '#1f77b4' title 'frictionless', "
+    << dq << " index 1 using 1:2 with linespoints pt 5 lc rgb '#d62728' title 'theta 30 deg, eta 0.1 (rolling on): dissipates; least-dissipating replica', "
+    << dq << " index 2 using 1:2 with points pt 2 ps 2 lc rgb '#1f77b4' title 'frictionless: unstable', "
+    << dq << " index 3 using 1:2 with points pt 3 ps 2 lc rgb '#d62728' title 'rolling on: unstable'\n";
+  g << "reset\n" << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(cost_part) << "\n"
+    << "set title 'Collision test: accuracy against cost (stable runs; Pareto front joined)' noenhanced\n"
+    << "set xlabel 'wall seconds per simulated second (one core, contended machine)' noenhanced\n"
+    << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
+    << "set logscale xy\nset grid\nset key below box noenhanced\n"
+    << "set arrow 3 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
+    << " nohead dt 3 lc rgb '#2ca02c'\n"
+    << "plot " << dq << " index 0 using 3:2:(sprintf('%g', $1)) with labels offset 1.5,0.6 font ',8' tc rgb '#1f77b4' notitle, "
+    << dq << " index 0 using 3:2 with points pt 7 lc rgb '#1f77b4' title 'frictionless (labels: k)', "
+    << dq << " index 4 using 3:2 with lines lw 2 lc rgb '#1f77b4' title 'frictionless Pareto front', "
+    << dq << " index 1 using 3:2 with points pt 5 lc rgb '#d62728' title 'rolling on (drift = dissipation, not error)'\n";
+}
+
+void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
   double top = 1.0;
   for (const auto& p : s.points)
     if (p.ok) top = std::max(top, std::abs(p.drift));
@@ -98,95 +189,14 @@ void write_timestep_charts(TimestepStudy& s, const fs::path& dir) {
     if (timestep_failed(p, s.tolerance)) first_fail = std::min(first_fail, p.dt_factor);
 
   const fs::path csv = dir / "timestep.csv";
-  {
-    WholeTextFile c(csv);
-    c << "series,dt_factor,dt,status,failure,drift_per_simulated_s,max_relative_error,wall_s_per_simulated_s,pareto,error,"
-         "replicas,drift_mean,drift_sd\n";
-    for (const auto& p : s.points) {
-      // A failed point has no drift, error or cost to give: nan, not a 0 that reads as exact.
-      const auto v = [&](double x) { return p.ok ? fmt(x, 6) : std::string("nan"); };
-      c << (p.friction ? "friction_rolling" : "frictionless") << "," << p.dt_factor << "," << v(p.dt) << ","
-        << timestep_status(p, s) << "," << (timestep_failed(p, s.tolerance) ? 1 : 0) << "," << v(p.drift) << ","
-        << v(p.max_relative_error) << "," << v(p.cost) << "," << (p.pareto ? 1 : 0) << ",\"" << p.error.substr(0, 120)
-        << "\"," << p.replicas << "," << v(p.drift_mean) << "," << v(p.drift_sd) << "\n";
-    }
-    c.commit();
-  }
+  write_timestep_csv(s, csv);
   s.files.push_back(csv.string());
-
-  // gnuplot data blocks: 0 frictionless ok, 1 friction ok, 2 frictionless failed,
-  // 3 friction failed, 4 frictionless Pareto (by cost), 5 friction Pareto.
   const fs::path data = dir / "timestep.dat";
-  {
-    std::ofstream d(data);
-    d.precision(8);
-    for (int block = 0; block < 6; ++block) {
-      const bool fric = block % 2 == 1;
-      std::vector<TimestepPoint> sel;
-      for (const auto& p : s.points) {
-        if (p.friction != fric) continue;
-        if (block < 2 && p.ok) sel.push_back(p);
-        if (block >= 2 && block < 4 && !p.ok) sel.push_back(p);
-        if (block >= 4 && p.pareto) sel.push_back(p);
-      }
-      if (block >= 4) std::sort(sel.begin(), sel.end(), [](auto& a, auto& b) { return a.cost < b.cost; });
-      d << "# block " << block << "\n";
-      for (const auto& p : sel)
-        d << p.dt_factor << " " << (p.ok ? std::max(floor_v, std::abs(p.drift)) : ceiling) << " " << p.cost << "\n";
-      if (sel.empty()) d << "nan nan nan\n";
-      d << "\n\n";
-    }
-  }
-  const std::string dq = gnuplot_quoted(data.string());
+  write_timestep_data(s, data, ceiling);
   const fs::path drift_png = dir / "timestep_drift.png", cost_png = dir / "timestep_cost.png";
   const fs::path script = dir / "timestep.gp";
   ImageFile drift_image(drift_png.string()), cost_image(cost_png.string());
-  {
-    std::ofstream g(script);
-    g << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(drift_image.part()) << "\n"
-      << "set title 'Collision test (seed Fig. 2.6): energy drift against the time-step factor' noenhanced\n"
-      << "set xlabel 'dt factor k  (dt = k sqrt(m_min / Kn))' noenhanced\n"
-      << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
-      << "set logscale xy\nset grid\nset key below box noenhanced\n"
-      << "set xrange [" << s.points.front().dt_factor * 0.8 << ":" << s.points.back().dt_factor * 1.25 << "]\n"
-      << "set yrange [*:" << ceiling * 3 << "]\n";
-    if (first_fail < 1e300)
-      g << "set object 1 rect from " << first_fail * 0.97 << ", graph 0 to graph 1, graph 1 fc rgb '#ffd8d8' "
-        << "fs solid 0.6 noborder behind\n"
-        << "set label 1 'failure region' at " << first_fail << ", graph 0.93 offset 1,0 tc rgb '#b00000'\n";
-    g << "set arrow 1 from " << s.critical_factor_frictionless << ", graph 0 to " << s.critical_factor_frictionless
-      << ", graph 1 nohead dt 2 lw 2 lc rgb '#1f77b4'\n"
-      << "set label 2 'critical, normal mode (" << fmt(s.critical_factor_frictionless) << ")' at "
-      << s.critical_factor_frictionless << ", graph 0.06 rotate by 90 offset -1,0 tc rgb '#1f77b4'\n"
-      << "set arrow 2 from " << s.critical_factor_full << ", graph 0 to " << s.critical_factor_full
-      << ", graph 1 nohead dt 2 lw 2 lc rgb '#d62728'\n"
-      << "set label 3 'critical, " << s.critical_mode_full << " (" << fmt(s.critical_factor_full) << ")' at "
-      << s.critical_factor_full << ", graph 0.06 rotate by 90 offset -1,0 tc rgb '#d62728' noenhanced\n"
-      << "set arrow 3 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
-      << " nohead dt 3 lc rgb '#2ca02c'\n"
-      << "set label 4 'tolerance " << fmt(s.tolerance) << "' at graph 0.02, first " << s.tolerance * 1.5
-      << " tc rgb '#2ca02c'\n";
-    if (s.recommended_factor > 0)
-      g << "set arrow 4 from " << s.recommended_factor << ", graph 0 to " << s.recommended_factor
-        << ", graph 0.8 nohead lw 2 lc rgb '#2ca02c'\n"
-        << "set label 5 'recommended k = " << fmt(s.recommended_factor) << "' at " << s.recommended_factor
-        << ", graph 0.82 center tc rgb '#2ca02c'\n";
-    g << "plot " << dq << " index 0 using 1:2 with linespoints pt 7 lc rgb '#1f77b4' title 'frictionless', "
-      << dq << " index 1 using 1:2 with linespoints pt 5 lc rgb '#d62728' title 'theta 30 deg, eta 0.1 (rolling on): dissipates; least-dissipating replica', "
-      << dq << " index 2 using 1:2 with points pt 2 ps 2 lc rgb '#1f77b4' title 'frictionless: unstable', "
-      << dq << " index 3 using 1:2 with points pt 3 ps 2 lc rgb '#d62728' title 'rolling on: unstable'\n";
-    g << "reset\n" << gnuplot_png_terminal(1000, 720) << "set output " << gnuplot_quoted(cost_image.part()) << "\n"
-      << "set title 'Collision test: accuracy against cost (stable runs; Pareto front joined)' noenhanced\n"
-      << "set xlabel 'wall seconds per simulated second (one core, contended machine)' noenhanced\n"
-      << "set ylabel '|relative energy drift| per simulated second, worst of the replicas' noenhanced\n"
-      << "set logscale xy\nset grid\nset key below box noenhanced\n"
-      << "set arrow 3 from graph 0, first " << s.tolerance << " to graph 1, first " << s.tolerance
-      << " nohead dt 3 lc rgb '#2ca02c'\n"
-      << "plot " << dq << " index 0 using 3:2:(sprintf('%g', $1)) with labels offset 1.5,0.6 font ',8' tc rgb '#1f77b4' notitle, "
-      << dq << " index 0 using 3:2 with points pt 7 lc rgb '#1f77b4' title 'frictionless (labels: k)', "
-      << dq << " index 4 using 3:2 with lines lw 2 lc rgb '#1f77b4' title 'frictionless Pareto front', "
-      << dq << " index 1 using 3:2 with points pt 5 lc rgb '#d62728' title 'rolling on (drift = dissipation, not error)'\n";
-  }
+  write_timestep_script(s, data, script, drift_image.part(), cost_image.part(), ceiling, first_fail);
   run_gnuplot_script(script.string());
   drift_image.commit();
   cost_image.commit();
