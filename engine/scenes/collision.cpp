@@ -106,6 +106,44 @@ void warn_past_critical(CollisionResult& res) {
                                  "or longer run would show)");
 }
 
+// The gas: grains of the material's grading inserted at random, without overlap, in
+// a cube sized for collision.solid_fraction, with velocity components uniform in
+// [-velocity_max, velocity_max]. `hi` receives the cube's far corner.
+Particles make_gas(const CollisionConfig& cfg, const Material& mat, std::mt19937_64& rng, Vec3& hi) {
+  std::vector<double> radii = sample_radii(cfg.particles, mat.grading(), rng);
+  double vs = 0.0;
+  for (double r : radii) vs += sphere_volume(r);
+  const double edge = std::cbrt(vs / cfg.solid_fraction);
+  hi = Vec3::Constant(edge);
+  Particles p;
+  try {
+    insert_random(p, radii, Vec3::Zero(), hi, mat.density, rng);
+  } catch (const ConfigError& e) {  // the insertion's own words name no key of this scene
+    throw ConfigError("collision.solid_fraction", e.reason() +
+                                                      " (random insertion at collision.solid_fraction " +
+                                                      fmt(cfg.solid_fraction) + "): a lower solid_fraction");
+  }
+  for (auto& v : p.v)
+    for (int a = 0; a < 3; ++a) v[a] = uniform(rng, -cfg.velocity_max, cfg.velocity_max);
+  return p;
+}
+
+// The run's figures from its clock, its step count and its energy drift (the slope of
+// the relative energy error over the steps; infinite for a run that failed).
+void summarise_run(const CollisionConfig& cfg, const RunClock& clock, long steps_done, double dt,
+                   const std::vector<double>& steps_x, const std::vector<double>& rel_e, CollisionResult& res) {
+  const double secs = clock.wall_seconds();
+  res.steps_done = steps_done;
+  res.wall_seconds = secs;
+  res.cpu_seconds = clock.cpu_seconds();
+  res.threads = cfg.threads;
+  res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
+  res.simulated_seconds = static_cast<double>(res.steps_done) * dt;
+  res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;
+  res.drift_per_simulated_second = res.drift_per_million_steps / (1e6 * dt);
+  if (!res.outcome.ok()) res.drift_per_million_steps = res.drift_per_simulated_second = INFINITY;
+}
+
 }  // namespace
 
 CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
@@ -121,21 +159,9 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
     mat.rolling_eta = 0.0;
   }
   std::mt19937_64 rng(cfg.seed);
-  std::vector<double> radii = sample_radii(cfg.particles, mat.grading(), rng);
-  double vs = 0.0;
-  for (double r : radii) vs += sphere_volume(r);
-  const double edge = std::cbrt(vs / cfg.solid_fraction);
-  const Vec3 lo = Vec3::Zero(), hi = Vec3::Constant(edge);
-  Particles p;
-  try {
-    insert_random(p, radii, lo, hi, mat.density, rng);
-  } catch (const ConfigError& e) {  // the insertion's own words name no key of this scene
-    throw ConfigError("collision.solid_fraction", e.reason() +
-                                                      " (random insertion at collision.solid_fraction " +
-                                                      fmt(cfg.solid_fraction) + "): a lower solid_fraction");
-  }
-  for (auto& v : p.v)
-    for (int a = 0; a < 3; ++a) v[a] = uniform(rng, -cfg.velocity_max, cfg.velocity_max);
+  const Vec3 lo = Vec3::Zero();
+  Vec3 hi;
+  Particles p = make_gas(cfg, mat, rng, hi);
 
   double m_min = 1e300;
   for (double m : p.m) m_min = std::min(m_min, m);
@@ -152,7 +178,6 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
   Domain dom;
   dom.lo = lo;
   dom.hi = hi;
-
   ContactParams law = contact_params(mat);
   if (!cfg.keep_friction) law.ks = 0.0;  // frictionless: the tangential spring carries nothing
   World world(std::move(p), box_walls(lo, hi), dom, law, opt);
@@ -198,16 +223,7 @@ CollisionResult run_collision(const CollisionConfig& cfg, Observer* obs) {
                              (e.quantity() == "energy" ? std::string(" (collision.energy_guard sets the check's limit)")
                                                        : std::string());
   }
-  const double secs = clock.wall_seconds();
-  res.steps_done = world.step_count();
-  res.wall_seconds = secs;
-  res.cpu_seconds = clock.cpu_seconds();
-  res.threads = cfg.threads;
-  res.particle_steps_per_second = secs > 0 ? static_cast<double>(cfg.particles) * res.steps_done / secs : 0.0;
-  res.simulated_seconds = static_cast<double>(res.steps_done) * opt.dt;
-  res.drift_per_million_steps = slope(steps_x, rel_e) * 1e6;
-  res.drift_per_simulated_second = res.drift_per_million_steps / (1e6 * opt.dt);
-  if (!res.outcome.ok()) res.drift_per_million_steps = res.drift_per_simulated_second = INFINITY;
+  summarise_run(cfg, clock, world.step_count(), opt.dt, steps_x, rel_e, res);
   warn_unchecked_growth(cfg, res);
   warn_past_critical(res);
   res.outcome.join_warnings();
