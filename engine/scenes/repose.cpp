@@ -799,17 +799,9 @@ void finish_collapse(const ReposeConfig& cfg, const ReposeSizes& z, const World&
   measure_deposit(cfg, z, heap, p, prof, res);
 }
 
-}  // namespace
-
-ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
-  cfg.validate();
-  const RunClock clock;
-  ReposeResult res;
-  name_series(res);
+// The set-up the result records before anything runs: sizes, closures, the law.
+void record_setup(const ReposeConfig& cfg, const ReposeSizes& z, const ContactParams& law, ReposeResult& res) {
   res.threads = cfg.threads;
-
-  const Material& mat = cfg.material;
-  const ReposeSizes z = sizes_of(cfg);
   res.column_width = z.W;
   res.slab_depth_m = z.Ly;
   res.domain_length = z.L;
@@ -819,13 +811,76 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
   res.collapse_drag = cfg.collapse_drag;
   res.rest_ke_J = cfg.rest_ke_ratio * z.m_mean * z.g * z.d_mean;
   res.boundaries = describe_boundaries(cfg, z);
+  res.kn = law.kn;
+  res.ks = law.ks;
+}
 
-  Material law_mat = mat;
+// Preparation: damped settling behind the gate, levelling to the column's height,
+// settling again. Returns the levelled column (with the floor behind the gate).
+Particles prepare_column(ReposeRun& run, const ReposeSizes& z, const Floor& floor, Fill& fill, const ReposeWalls& rw,
+                         const Domain& dom, const ContactParams& law, const WorldOptions& opt) {
+  ReposeResult& res = run.res;
+  World w1(std::move(fill.grains), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
+  res.prep_time_s += run.settle(w1, std::sqrt(2.0 * fill.height / z.g), "settle");
+  if (run.obs) run.obs->on_progress(0.15);
+
+  run.stage = "level";
+  long kept = 0;
+  Particles lev = level_column(w1, floor.level + z.H, kept);
+  World w2(std::move(lev), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
+  res.prep_time_s += run.settle(w2, 0.02, "settle_levelled");
+  if (run.obs) run.obs->on_progress(0.25);
+  res.particles = kept;
+  record_column(w2.particles(), floor.level, z, res);
+  return w2.particles();
+}
+
+// Collapse: full floor, no gate, no damping, until the heap is at rest or the time
+// limit; then the deposit measured. The contact history of the column is rebuilt
+// within the first steps (the world is reassembled with the floor beyond the gate,
+// which the gate plane would otherwise have touched).
+void collapse(ReposeRun& run, const ReposeSizes& z, const Floor& floor, const Particles& column, const ReposeWalls& rw,
+              const Domain& dom, const ContactParams& law, const WorldOptions& opt) {
+  const ReposeConfig& cfg = run.cfg;
+  ReposeResult& res = run.res;
+  run.stage = "collapse";
+  if (run.obs) run.obs->on_stage("collapse");
+  WorldOptions copt = opt;
+  copt.local_damping = 0.0;
+  Wall gate_off = rw.gate;
+  gate_off.active = false;
+  World w(collapse_grains(floor, column, cfg.material.density), rw.with_sides({rw.floor, rw.back, gate_off, rw.end}),
+          dom, law, copt);
+  const StabilityLimits lim = stability_limits(w);
+  res.dt_critical = lim.governing().dt_critical;
+  res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
+  if (cfg.energy_guard >= 0.0) w.enable_energy_guard(cfg.energy_guard, 1000);
+
+  const std::vector<std::uint8_t> mobile = mobile_mask(w.particles());
+  const HeapReader heap{cfg, z, mobile, floor.level, static_cast<int>(std::ceil(cfg.front_max_gap * z.d_mean / z.bin))};
+  const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
+  const bool at_rest = collapse_to_rest(run, w, heap, chunk);
+  res.steps = run.steps_total;
+  if (run.obs) run.obs->on_snapshot("heap", w.time(), w.particles());
+  res.final_particles = w.particles();
+  res.final_particles.f.clear();  // forces and torques are not part of the record
+  res.final_particles.t.clear();
+  finish_collapse(cfg, z, w, heap, at_rest, chunk, res);
+}
+
+}  // namespace
+
+ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
+  cfg.validate();
+  const RunClock clock;
+  ReposeResult res;
+  name_series(res);
+  const ReposeSizes z = sizes_of(cfg);
+  Material law_mat = cfg.material;
   law_mat.kn *= cfg.stiffness_scale;
   law_mat.ks *= cfg.stiffness_scale;
   const ContactParams law = contact_params(law_mat);
-  res.kn = law.kn;
-  res.ks = law.ks;
+  record_setup(cfg, z, law, res);
 
   std::mt19937_64 rng(cfg.seed);
   const Floor floor = lay_floor(cfg, rng);
@@ -843,46 +898,8 @@ ReposeResult run_repose(const ReposeConfig& cfg, Observer* obs) {
 
   ReposeRun run{cfg, obs, res, fill.n_floor, z.m_mean * z.g * z.d_mean};
   try {
-    // Preparation: damped settling behind the gate, levelling, settling again.
-    World w1(std::move(fill.grains), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
-    res.prep_time_s += run.settle(w1, std::sqrt(2.0 * fill.height / z.g), "settle");
-    if (obs) obs->on_progress(0.15);
-
-    run.stage = "level";
-    long kept = 0;
-    Particles lev = level_column(w1, floor.level + z.H, kept);
-    World w2(std::move(lev), rw.with_sides({rw.floor, rw.back, rw.gate}), dom, law, opt);
-    res.prep_time_s += run.settle(w2, 0.02, "settle_levelled");
-    if (obs) obs->on_progress(0.25);
-    res.particles = kept;
-    record_column(w2.particles(), floor.level, z, res);
-
-    // Collapse: full floor, no gate, no damping. The contact history of the column
-    // is rebuilt within the first steps (the world is reassembled with the floor
-    // beyond the gate, which the gate plane would otherwise have touched).
-    run.stage = "collapse";
-    if (obs) obs->on_stage("collapse");
-    WorldOptions copt = opt;
-    copt.local_damping = 0.0;
-    Wall gate_off = rw.gate;
-    gate_off.active = false;
-    World w(collapse_grains(floor, w2.particles(), mat.density), rw.with_sides({rw.floor, rw.back, gate_off, rw.end}),
-            dom, law, copt);
-    const StabilityLimits lim = stability_limits(w);
-    res.dt_critical = lim.governing().dt_critical;
-    res.critical_mode = lim.governing().mode + " (" + lim.governing().contact + ")";
-    if (cfg.energy_guard >= 0.0) w.enable_energy_guard(cfg.energy_guard, 1000);
-
-    const std::vector<std::uint8_t> mobile = mobile_mask(w.particles());
-    const HeapReader heap{cfg, z, mobile, floor.level, static_cast<int>(std::ceil(cfg.front_max_gap * z.d_mean / z.bin))};
-    const long chunk = std::max(1L, static_cast<long>(std::llround(cfg.sample_interval / w.dt())));
-    const bool at_rest = collapse_to_rest(run, w, heap, chunk);
-    res.steps = run.steps_total;
-    if (obs) obs->on_snapshot("heap", w.time(), w.particles());
-    res.final_particles = w.particles();
-    res.final_particles.f.clear();  // forces and torques are not part of the record
-    res.final_particles.t.clear();
-    finish_collapse(cfg, z, w, heap, at_rest, chunk, res);
+    const Particles column = prepare_column(run, z, floor, fill, rw, dom, law, opt);
+    collapse(run, z, floor, column, rw, dom, law, opt);
   } catch (const InstabilityError& e) {
     res.outcome.status = SceneStatus::unstable;
     res.outcome.failed_stage = run.stage;
