@@ -4,6 +4,7 @@
 
 #include <sqlite3.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -89,10 +90,9 @@ Store::Store(const std::string& path, bool read_only) : path_(path), conn_(check
     dev_ = st.st_dev;
     ino_ = st.st_ino;
   }
-  if (::stat((path_ + "-wal").c_str(), &st) == 0) {  // made by migrate's first read
-    wal_dev_ = st.st_dev;
-    wal_ino_ = st.st_ino;
-  }
+  // The log and its index, made by migrate's first read.
+  if (::stat((path_ + "-wal").c_str(), &st) == 0) wal_id_ = {st.st_dev, st.st_ino};
+  if (::stat((path_ + "-shm").c_str(), &st) == 0) shm_id_ = {st.st_dev, st.st_ino};
 }
 
 Store::~Store() {
@@ -105,13 +105,23 @@ Store::~Store() {
 // for fear of losing them. A truncating checkpoint writes them into the file this store
 // holds open and leaves the log empty.
 void Store::empty_log_of_lost_file() {
-  if (sqlite3_exec(conn_.handle(), "PRAGMA wal_checkpoint(TRUNCATE)", nullptr, nullptr, nullptr) == SQLITE_OK) return;
-  // Another connection to the lost file holds the log: moved from the path, if the log
-  // there is still this store's.
-  struct stat st {};
-  const std::string wal = path_ + "-wal";
-  if (wal_ino_ != 0 && ::stat(wal.c_str(), &st) == 0 && st.st_dev == wal_dev_ && st.st_ino == wal_ino_)
-    std::rename(wal.c_str(), (wal + ".of-lost-file-" + std::to_string(::getpid())).c_str());
+  // The pragma answers OK even when a reader kept it from truncating (its busy flag
+  // in the result row): the call says so. A reader waits its turn for 2 s, not the
+  // connection's 30.
+  sqlite3_busy_timeout(conn_.handle(), 2000);
+  int frames = 0, done = 0;
+  if (sqlite3_wal_checkpoint_v2(conn_.handle(), nullptr, SQLITE_CHECKPOINT_TRUNCATE, &frames, &done) == SQLITE_OK)
+    return;
+  // Another connection to the lost file holds the log: the log and its index moved
+  // from the path (an opener of the new file pairs a log with an index), if they are
+  // still this store's.
+  const auto move_aside = [](const std::string& file, const FileId& id) {
+    struct stat st {};
+    if (id.ino != 0 && ::stat(file.c_str(), &st) == 0 && st.st_dev == id.dev && st.st_ino == id.ino)
+      std::rename(file.c_str(), (file + ".of-lost-file-" + std::to_string(::getpid())).c_str());
+  };
+  move_aside(path_ + "-wal", wal_id_);
+  move_aside(path_ + "-shm", shm_id_);
 }
 
 std::string Store::save_lost_file() {
@@ -137,7 +147,9 @@ std::string Store::save_lost_file() {
 std::string Store::file_lost() const {
   if (ino_ == 0) return "";  // never seen (read-only stores are not asked)
   struct stat st {};
-  if (::stat(path_.c_str(), &st) != 0) return "deleted";
+  // Only a name that is gone is a deleted file: a stat refused (a folder's permissions
+  // changed, a network file system's hiccup) says nothing about it.
+  if (::stat(path_.c_str(), &st) != 0) return errno == ENOENT || errno == ENOTDIR ? "deleted" : "";
   if (st.st_dev != dev_ || st.st_ino != ino_) return "replaced by another file";
   return "";
 }

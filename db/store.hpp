@@ -137,8 +137,11 @@ class Store {
                    const char* note);
   std::string path_;
   Connection conn_;
-  unsigned long long dev_ = 0, ino_ = 0;          // the opened file's identity
-  unsigned long long wal_dev_ = 0, wal_ino_ = 0;  // and its write-ahead log's
+  struct FileId {
+    unsigned long long dev = 0, ino = 0;
+  };
+  unsigned long long dev_ = 0, ino_ = 0;  // the opened file's identity
+  FileId wal_id_, shm_id_;                // its write-ahead log's and the log index's
 };
 
 double unix_now();

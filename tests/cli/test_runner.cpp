@@ -2,6 +2,8 @@
 // and overlapping jobs.
 #include "cli_util.hpp"
 
+#include <sqlite3.h>
+
 #include <algorithm>
 #include <chrono>
 #include <csignal>
@@ -317,6 +319,33 @@ TEST(Runner, ADatabaseReplacedMidRunIsNotOverwrittenByTheRunsLog) {
   const Result m = run_demcal({"merge", "--into", "demcal.db", saved}, d.path.string());
   EXPECT_EQ(m.rc, 0) << m.err;
   EXPECT_EQ(tasks_of(db, "slow").size(), 6u);
+  EXPECT_EQ(tasks_of(db, "other").size(), 2u);
+}
+
+// The same with a reader of the lost file holding its log open: the truncating
+// checkpoint cannot run (SQLite's pragma answered OK all the same, and the log stayed
+// to be replayed into the backup), so the log and its index are moved from the path.
+TEST(Runner, ADatabaseReplacedUnderAReaderIsNotOverwrittenByTheRunsLog) {
+  TempDir d;
+  write(d.file("other.json"), collision_job("other", {0.05, 0.06}));
+  ASSERT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
+  write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
+  const std::string db = d.file("demcal.db");
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  ASSERT_TRUE(one_task_seen_running(db, "slow")) << "no task was seen running within 60 s";
+  sqlite3* reader = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(db.c_str(), &reader, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(reader, "BEGIN; SELECT count(*) FROM tasks;", nullptr, nullptr, nullptr), SQLITE_OK);
+  fs::copy_file(d.file("backup.db"), d.file("restore.tmp"));
+  fs::rename(d.file("restore.tmp"), db);
+  const Result r = finish(runner, d.path.string());
+  sqlite3_exec(reader, "COMMIT", nullptr, nullptr, nullptr);
+  sqlite3_close(reader);
+  EXPECT_EQ(r.rc, 1) << r.err;
+  EXPECT_NE(r.err.find("was replaced by another file while this run was writing it"), std::string::npos) << r.err;
+  const Result st = run_demcal({"status"}, d.path.string());
+  EXPECT_EQ(st.rc, 0) << st.err;
+  EXPECT_EQ(st.out.find("slow"), std::string::npos) << "the run's log was replayed into the backup:\n" << st.out;
   EXPECT_EQ(tasks_of(db, "other").size(), 2u);
 }
 
