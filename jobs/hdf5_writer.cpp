@@ -187,7 +187,7 @@ std::runtime_error unreadable(const std::string& path, const H5::Exception& e) {
   } else {
     const std::string bytes = " (" + std::to_string(size) + " bytes)";
     why = H5Fis_hdf5(path.c_str()) > 0 ? "an HDF5 file that cannot be read" + bytes +
-                                             ": truncated or damaged (HDF5: " + e.getDetailMsg() + ")"
+                                             ": cut short, damaged, or held by a writer (HDF5: " + e.getDetailMsg() + ")"
                                        : "not an HDF5 file" + bytes + ": damaged or overwritten";
   }
   return std::runtime_error("cannot read " + path + ": " + why);

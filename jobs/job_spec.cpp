@@ -8,6 +8,8 @@
 #include "text_groups.hpp"
 #include "validate.hpp"
 
+#include "engine/format.hpp"
+
 #include <cmath>
 #include <algorithm>
 #include <cstring>
@@ -173,6 +175,38 @@ void read_settings(const nlohmann::json& j, Job& job) {
   }
 }
 
+// The critical step came out 0 s (or not a number): names the input to blame, the
+// grains' density when the smallest grain's mass or moment of inertia is out of range,
+// else material.kn (kn / m overflows).
+[[noreturn]] void refuse_zero_critical_step(const SceneDef& scene, const Task& t, const engine::StepForecast& f) {
+  const nlohmann::json& p = t.params;
+  const auto number = [&](const char* key, double fallback) {
+    return p.contains(key) && p.at(key).is_number() ? p.at(key).get<double>() : fallback;
+  };
+  const double d = number("d_min", 0.0);
+  double rho = number("density", 0.0);
+  std::string field = "material.density", what = "density";
+  if (p.contains("scaled_density")) {
+    rho = number("scaled_density", 0.0);
+    field = scene.name + ".scaled_density";
+    what = "scaled density";
+  } else if (p.contains("density_scale")) {
+    rho *= number("density_scale", 1.0);
+    field = scene.name + ".density_scale";
+    what = "density (material.density x density_scale)";
+  }
+  const double m = rho * M_PI * d * d * d / 6.0, inertia = 0.1 * m * d * d;
+  std::ostringstream crit;
+  crit << std::setprecision(4) << f.dt_critical;
+  const std::string head = "task #" + std::to_string(t.index) + ": the critical time step works out to " + crit.str() + " s: ";
+  if (!(std::isnormal(m) && std::isnormal(inertia)))
+    throw JobError(field, head + "the smallest grain's mass or moment of inertia is not a normal positive number "
+                                 "(density x pi d_min^3 / 6, and 0.1 of that x d_min^2); check the " + what +
+                                 " and the diameters");
+  throw JobError("material.kn", head + "kn over the smallest grain's mass (" + engine::fmt(m, 3) +
+                                    " kg) is past the largest number a double holds; check material.kn");
+}
+
 // A step past the critical one is legal in a job (a stability study charts where a
 // method fails; the engine refuses the task with the mode named), but a user who
 // did not mean it should hear before the run.
@@ -189,18 +223,9 @@ void note_unstable_steps(const SceneDef& scene, Job& job) {
                          " s, not a finite positive number (dt_factor x sqrt(m_min / kn), with the scene's stiffness "
                          "scale): check material.kn, the stiffness scale, the diameters and the density");
     // A density of 1e-300 passes "> 0", and the smallest grain's moment of inertia
-    // rounds to 0: every step would read as past a critical step of 0 s, "a dt_factor
-    // of at most 0", blaming the step for the density.
-    if (!(std::isfinite(f.dt_critical) && f.dt_critical > 0.0)) {
-      const bool scaled = t.params.contains("scaled_density");
-      std::ostringstream crit;
-      crit << std::setprecision(4) << f.dt_critical;
-      throw JobError(scaled ? scene.name + ".scaled_density" : "material.density",
-                     "task #" + std::to_string(t.index) + ": the critical time step works out to " + crit.str() +
-                         " s: the smallest grain's mass or moment of inertia is not a "
-                         "normal positive number (density x pi d_min^3 / 6, and 0.1 of that x d_min^2); check the " +
-                         (scaled ? "scaled density" : "density") + " and the diameters");
-    }
+    // rounds to 0; a kn of 1e308 makes kn / m overflow: either way the critical step is
+    // 0 s, and every step would read as past it, "a dt_factor of at most 0".
+    if (!(std::isfinite(f.dt_critical) && f.dt_critical > 0.0)) refuse_zero_critical_step(scene, t, f);
     if (!f.exceeds()) continue;
     if (shown == 5) {
       ++more;

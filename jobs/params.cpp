@@ -171,15 +171,6 @@ nlohmann::json check_scalar(const ParamSpec& s, const nlohmann::json& v, const s
 }
 
 std::string closest(const std::string& word, const std::vector<std::string>& candidates) {
-  // A name without its unit or part ("theta" for "theta_deg", "confining" for
-  // "confining_kpa"): closer than any typo ("theta" is two edits from "eta").
-  std::string prefixed;
-  if (word.size() >= 3)
-    for (const auto& c : candidates)
-      if (c.size() > word.size() && c.compare(0, word.size(), word) == 0 &&
-          (c[word.size()] == '_' || c[word.size()] == '.') && (prefixed.empty() || c.size() < prefixed.size()))
-        prefixed = c;
-  if (!prefixed.empty()) return prefixed;
   std::string best;
   std::size_t best_d = 3;  // more than two edits apart is not a typo
   for (const auto& c : candidates) {
@@ -189,6 +180,18 @@ std::string closest(const std::string& word, const std::vector<std::string>& can
       best = c;
     }
   }
+  if (best_d <= 1) return best;
+  // A name without its unit or part ("theta" for "theta_deg", "confining" for
+  // "confining_kpa"), when one key alone reads so ("phi" would be several): closer
+  // than a typo two edits away ("theta" is two from "eta").
+  std::vector<std::string> prefixed;
+  if (word.size() >= 3)
+    for (const auto& c : candidates)
+      if (c.size() > word.size() && c.compare(0, word.size(), word) == 0 &&
+          (c[word.size()] == '_' || c[word.size()] == '.') &&
+          std::find(prefixed.begin(), prefixed.end(), c) == prefixed.end())
+        prefixed.push_back(c);
+  if (prefixed.size() == 1) return prefixed.front();
   return best;
 }
 

@@ -224,7 +224,7 @@ std::string advice(const nlohmann::json& p) {
   // they spread instead of heaping (a repose column at eta 0.1 was still flowing at
   // its 1.5 s limit), and with no tangential force nothing turns a grain for eta to resist.
   if (c.material.friction_angle == 0.0)
-    next_note(os, 6) << "material.theta_deg is 0 (the default when a job leaves it out): "
+    next_note(os, 6) << "material.theta_deg is 0 (also its default when a job leaves it out): "
        << (c.collapse_drag > 0.0 ? "frictionless grains build no heap, they spread until repose.collapse_drag stops "
                                    "them, and the low deposit's angle is the drag's, not the material's"
                                  : "frictionless grains build no heap, they spread and may still be moving at "

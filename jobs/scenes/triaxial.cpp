@@ -311,7 +311,7 @@ std::string advice(const nlohmann::json& p) {
   // theta_deg defaults to 0, so a job that forgets it tests frictionless grains, and
   // nothing else says so (a triaxial test of them is legal: it runs, to other angles).
   if (c.material.friction_angle == 0.0)
-    next_note(os, 2) << "material.theta_deg is 0 (the default when a job leaves it out): the grains are frictionless, "
+    next_note(os, 2) << "material.theta_deg is 0 (also its default when a job leaves it out): the grains are frictionless, "
           "and the test measures a frictionless packing's angles, not a sand's";
   // Without friction no tangential force turns a grain, spins stay zero, and the
   // rolling resistance never acts: tasks that differ only in eta run the same

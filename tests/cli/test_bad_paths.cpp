@@ -239,6 +239,14 @@ TEST(BadPaths, FilesThatCannotBeJobsAreRefused) {
   r = run_demcal({"validate", "light-tx.json"}, d.path.string());
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("triaxial.scaled_density: task #0: the critical time step"), std::string::npos) << r.err;
+  // A stiffness past what a double holds over the grain's mass: kn is named, not density.
+  j = nlohmann::json::parse(collision_job("stiff", {0.1}));
+  j["material"]["kn"] = 1e308;
+  write(d.file("stiff.json"), j.dump());
+  r = run_demcal({"validate", "stiff.json"}, d.path.string());
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("material.kn: task #0: the critical time step works out to 0 s: kn over the smallest grain's mass"),
+            std::string::npos) << r.err;
   // A column that would need billions of grains.
   write(d.file("big.json"), R"({"name": "big", "scene": "repose", "fidelity": "quick",
                                 "repose": {"column_width": 10, "column_height": 10, "depth_diameters": 1000}})");

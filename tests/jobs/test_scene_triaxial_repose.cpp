@@ -510,7 +510,7 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   j = base;
   j["material"]["theta_deg"] = 0;
   j["grid"] = {{"eta", {0.0, 0.5}}};
-  EXPECT_NE(notes_of(j).find("task #0: material.theta_deg is 0 (the default when a job leaves it out): the grains are "
+  EXPECT_NE(notes_of(j).find("task #0: material.theta_deg is 0 (also its default when a job leaves it out): the grains are "
                             "frictionless, and the test measures a frictionless packing's angles, not a sand's\n"),
             std::string::npos)
       << notes_of(j);
@@ -863,7 +863,7 @@ TEST(TriaxialReposeScenes, AFrictionlessReposeColumnIsNoted) {
   EXPECT_EQ(notes_of(j).find("theta_deg is 0"), std::string::npos) << notes_of(j);
   j["material"].erase("theta_deg");
   const std::string notes = notes_of(j);
-  EXPECT_NE(notes.find("task #0: material.theta_deg is 0 (the default when a job leaves it out): frictionless grains "
+  EXPECT_NE(notes.find("task #0: material.theta_deg is 0 (also its default when a job leaves it out): frictionless grains "
                        "build no heap, they spread and may still be moving at repose.time_limit (not_settled)\n"),
             std::string::npos)  // eta 0: nothing said of it
       << notes;

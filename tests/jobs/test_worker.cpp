@@ -99,11 +99,6 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
   EXPECT_FALSE(std::filesystem::exists(bad));
 }
 
-// A disk that fills while the file is written (here a file-size limit, which makes
-// write() fail as a full disk does): an exception naming the path and the likely
-// cause, no crash, no .part left. HDF5 reports the failure when the file is closed,
-// and a second close of that file (the C++ destructor's) crashed the worker with
-// SIGSEGV. In a child process, so that the limit and a crash stay there.
 // A damaged task file is read with the reason: HDF5 alone says "H5Fopen failed",
 // whether the file was cut short or is not HDF5 at all.
 TEST(TaskFile, ADamagedFileIsNamedWithWhatIsWrongWithIt) {
@@ -126,7 +121,7 @@ TEST(TaskFile, ADamagedFileIsNamedWithWhatIsWrongWithIt) {
   };
   std::filesystem::resize_file(f, size / 2);
   EXPECT_NE(error_of([&] { read_series(f, "energy"); }).find("an HDF5 file that cannot be read (" +
-                                                             std::to_string(size / 2) + " bytes): truncated or damaged"),
+                                                             std::to_string(size / 2) + " bytes): cut short, damaged"),
             std::string::npos);
   std::ofstream(f, std::ios::trunc) << std::string(4000, 'x');
   EXPECT_NE(error_of([&] { read_task_key(f); }).find("cannot read " + f + ": not an HDF5 file (4000 bytes)"),
@@ -135,6 +130,11 @@ TEST(TaskFile, ADamagedFileIsNamedWithWhatIsWrongWithIt) {
   EXPECT_NE(error_of([&] { series_names(f); }).find(": an empty file"), std::string::npos);
 }
 
+// A disk that fills while the file is written (here a file-size limit, which makes
+// write() fail as a full disk does): an exception naming the path and the likely
+// cause, no crash, no .part left. HDF5 reports the failure when the file is closed,
+// and a second close of that file (the C++ destructor's) crashed the worker with
+// SIGSEGV. In a child process, so that the limit and a crash stay there.
 TEST(TaskFile, AFullDiskMidWriteIsAnErrorNotACrash) {
   demcal::test::TempDir d;
   const std::string path = d.file("3-abcdef03.h5");
