@@ -66,6 +66,15 @@ class Runner {
   void handle_exit(const Running& r, int wstatus, bool stopping);
   void stop_all();
   RunSummary run_loop();
+  // Claims and starts queued tasks while a worker is free.
+  void launch_queued();
+  // Other runners are judged on a timer, whatever this run's own queue holds: a dead
+  // one's tasks come back within kRunnerConfirmS of the first look, not when this
+  // run's queue runs dry. Whether any came back.
+  bool judge_other_runners(bool idle, std::chrono::steady_clock::time_point now);
+  // After the loop: an interrupted or lost run stops its tasks; the summary's counts.
+  void finish_run(RunSummary& s);
+  std::chrono::steady_clock::time_point last_judged_, last_swept_;
   // The database could not be written (a full disk, a lock): the workers are stopped without
   // storing anything, this run's tasks go back to pending if the database still
   // takes that, and the error is rethrown saying what became of them.
@@ -439,6 +448,36 @@ void Runner::abandon(const db::DbError& e) {
                     e.bad_input());
 }
 
+void Runner::launch_queued() {
+  while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal() && output_failure_.empty()) {
+    if (superseded()) {  // checked per task: the queued tasks left the job with the old spec
+      queue_.clear();
+      break;
+    }
+    const db::TaskRow row = queue_.front();
+    queue_.pop_front();
+    if (store_.claim(row.id, token_)) launch(row);
+  }
+}
+
+bool Runner::judge_other_runners(bool idle, std::chrono::steady_clock::time_point now) {
+  if (!idle && now - last_judged_ <= std::chrono::duration<double>(kRunnerBeatS)) return false;
+  last_judged_ = now;
+  bool requeued = false;
+  if (int n = requeue_dead_runners(store_, &beats_)) {
+    progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", read_counts());
+    requeued = true;
+  }
+  // Another host's runner is judged dead only once its silence has been watched
+  // (kRunnerConfirmS): its files go then, not at this run's start.
+  if (requeued || now - last_swept_ > std::chrono::duration<double>(kRunnerBeatS)) {
+    last_swept_ = now;
+    if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
+      progress_.line(leftovers_removed_line(n, dir_), read_counts());
+  }
+  return requeued;
+}
+
 RunSummary Runner::run_loop() {
   StopSignalGuard guard;
   Heartbeat heartbeat(store_, token_);  // before the re-queue of dead runners' tasks
@@ -448,43 +487,17 @@ RunSummary Runner::run_loop() {
   s.reused = start.done;
   if (start.done > 0)
     *opt_.log << start.done << " of " << start.total << " task(s) already done, reused\n";
-  auto last_refresh = std::chrono::steady_clock::now(), last_judged = last_refresh, last_file_check = last_refresh,
-       last_counts = last_refresh, last_swept = last_refresh;
+  auto last_refresh = std::chrono::steady_clock::now(), last_file_check = last_refresh, last_counts = last_refresh;
+  last_judged_ = last_swept_ = last_refresh;
   std::string holders_said;  // the other runners this run last said it waits on
   while (!stop_signal()) {
-    while (static_cast<int>(running_.size()) < workers_ && !queue_.empty() && !stop_signal() &&
-           output_failure_.empty()) {
-      if (superseded()) {  // checked per task: the queued tasks left the job with the old spec
-        queue_.clear();
-        break;
-      }
-      const db::TaskRow row = queue_.front();
-      queue_.pop_front();
-      if (store_.claim(row.id, token_)) launch(row);
-    }
+    launch_queued();
     reap(false);
     if (!output_failure_.empty() && running_.empty()) break;  // the tasks left could not write their files either
     const bool idle = running_.empty() && queue_.empty();
     const auto now = std::chrono::steady_clock::now();
     heartbeat.tick();
-    // Other runners are judged on a timer, whatever this run's own queue holds: a dead
-    // one's tasks come back within kRunnerConfirmS of the first look, not when this
-    // run's queue runs dry.
-    bool requeued = false;
-    if (idle || now - last_judged > std::chrono::duration<double>(kRunnerBeatS)) {
-      last_judged = now;
-      if (int n = requeue_dead_runners(store_, &beats_)) {
-        progress_.line("re-queued " + std::to_string(n) + " task(s) left running by a runner that is gone", read_counts());
-        requeued = true;
-      }
-      // Another host's runner is judged dead only once its silence has been watched
-      // (kRunnerConfirmS): its files go then, not at this run's start.
-      if (requeued || now - last_swept > std::chrono::duration<double>(kRunnerBeatS)) {
-        last_swept = now;
-        if (int n = remove_leftovers_of_dead_runners(dir_, store_, result_tag_, &beats_))
-          progress_.line(leftovers_removed_line(n, dir_), read_counts());
-      }
-    }
+    const bool requeued = judge_other_runners(idle, now);
     if (now - last_file_check > std::chrono::seconds(2)) {
       last_file_check = now;
       s.database_lost = database_lost(store_);
@@ -510,6 +523,11 @@ RunSummary Runner::run_loop() {
     progress_.update(counts_, eta());
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+  finish_run(s);
+  return s;
+}
+
+void Runner::finish_run(RunSummary& s) {
   if (stop_signal()) {
     *opt_.log << "\n" << stop_signal_words(stop_signal()) << ": stopping " << running_.size()
               << " running task(s); they will be retried by the next run\n";
@@ -528,7 +546,6 @@ RunSummary Runner::run_loop() {
   s.superseded = superseded_;
   s.output_failure = output_failure_;
   save_lost_database(store_, s);
-  return s;
 }
 
 }  // namespace
