@@ -249,9 +249,9 @@ SceneOutput run(const nlohmann::json& p, const RunContext& ctx) {
   return out;
 }
 
-std::string advice(const nlohmann::json& p) {
-  const engine::TriaxialConfig c = config_from(p);
-  std::ostringstream os;
+// The shear's rate against quasi-static, the stiffness against the preparation's
+// stress, and the step against the critical one.
+void advise_rates_and_step(const engine::TriaxialConfig& c, const engine::StepForecast& f, std::ostringstream& os) {
   // The quasi-static check, forecast: at the start of shear the mean stress is p0, so
   // a nominal inertial number above the limit is a warning every such task will carry.
   const double i0 = c.nominal_inertial_number();
@@ -273,7 +273,6 @@ std::string advice(const nlohmann::json& p) {
   // the limit, and the dense preparation's frictionless stages step at the same
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
   // 0.83 did not settle, and 400 grains at 0.55 and 0.62 jittered without settling.
-  const engine::StepForecast f = c.step_forecast();
   if (!f.exceeds() && f.dt > engine::TriaxialConfig::kJitterStepFraction * f.dt_critical) {
     // A concrete step (a wider grading or a stiffer rolling spring puts the default
     // itself past the fraction noted here).
@@ -286,6 +285,10 @@ std::string advice(const nlohmann::json& p) {
                       : "a triaxial.dt_factor of about " + engine::fmt(c.dt_factor * suggest / f.dt, 2))
        << " keeps it at " << engine::TriaxialConfig::kSuggestedStepFraction << " of that limit";
   }
+}
+
+// A shear too short for the servo, a preparation longer than its step budget.
+void advise_stage_lengths(const engine::TriaxialConfig& c, const engine::StepForecast& f, std::ostringstream& os) {
   // A shear of a few hundred steps outruns the lateral servo (at 1 /s, 24 steps: sigma3
   // strayed by 3,981%); the run would end invalid. The quick fidelity study's fastest
   // valid setting takes about 5,000.
@@ -308,6 +311,11 @@ std::string advice(const nlohmann::json& p) {
        << c.prep_strain_rate << " /s and a step of " << step << " s, need about " << steps_to_close
        << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget";
+}
+
+// Frictionless grains, and settings the task does not use (its key changes, its work
+// does not).
+void advise_unused_settings(const engine::TriaxialConfig& c, const nlohmann::json& p, std::ostringstream& os) {
   // theta_deg defaults to 0, so a job that forgets it tests frictionless grains, and
   // nothing else says so (a triaxial test of them is legal: it runs, to other angles).
   if (c.material.friction_angle == 0.0)
@@ -329,6 +337,10 @@ std::string advice(const nlohmann::json& p) {
        << " kg/m^3) is not used: the grains' density is triaxial.scaled_density (" << c.scaled_density
        << " kg/m^3); triaxial.density_scale scales material.density instead";
   if (const std::string cut = grading_cut_note(c.material.grading()); !cut.empty()) next_note(os, 3) << cut;
+}
+
+// Preparation tolerances loose enough to end a stage far from equilibrium.
+void advise_tolerances(const engine::TriaxialConfig& c, std::ostringstream& os) {
   // Loose enough, a stage "reaches equilibrium" at once: 0.99 both stopped the dense
   // compression after 2,000 steps at box porosity 0.494, and the sample went on as dense.
   const engine::TriaxialConfig d;
@@ -341,6 +353,10 @@ std::string advice(const nlohmann::json& p) {
   if (!loose.empty())
     next_note(os, 3) << loose << " let a preparation stage end that far from equilibrium: the sample is not the "
        << "packing asked for (the defaults: " << d.ufr_tolerance << " and " << d.stress_tolerance << ")";
+}
+
+// A series too coarse, or a shear too short, for what the run judges from it.
+void advise_sampling(const engine::TriaxialConfig& c, const engine::StepForecast& f, std::ostringstream& os) {
   // Rows every sample_steps steps replace rows every sample_strain of strain: tasks
   // that differ only in sample_strain then store the same series under different keys.
   if (c.sample_steps > 0 && c.sample_strain != engine::TriaxialConfig{}.sample_strain)
@@ -374,6 +390,17 @@ std::string advice(const nlohmann::json& p) {
          << engine::TriaxialResult::kPeakSmoothingRows << ", which cannot locate the peak (the run will warn); sample "
             "more finely";
   }
+}
+
+std::string advice(const nlohmann::json& p) {
+  const engine::TriaxialConfig c = config_from(p);
+  const engine::StepForecast f = c.step_forecast();
+  std::ostringstream os;
+  advise_rates_and_step(c, f, os);
+  advise_stage_lengths(c, f, os);
+  advise_unused_settings(c, p, os);
+  advise_tolerances(c, os);
+  advise_sampling(c, f, os);
   return os.str();
 }
 
