@@ -29,6 +29,20 @@ int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string
   return n;
 }
 
+// Whether a task of `job` was seen running in `db` within 60 s (the file may be there
+// before its tables are).
+bool task_seen_running(const std::string& db, const std::string& job) {
+  for (int i = 0; i < 3000; ++i) {
+    usleep(20000);
+    try {
+      if (fs::exists(db) && count_status(tasks_of(db, job), "running") >= 1) return true;
+    } catch (const std::exception&) {
+      // the file is there, its tables not yet
+    }
+  }
+  return false;
+}
+
 }  // namespace
 
 TEST(Mpi, FarmEqualsLocalRunBitForBit) {
@@ -154,16 +168,7 @@ TEST(Mpi, ADatabaseDeletedMidRunStopsTheHandOut) {
   std::vector<std::string> argv = {DEMCAL_MPIEXEC, "-np", "3", "--oversubscribe", DEMCAL_BIN, "run", "j.json", "--mpi"};
   const pid_t pid = spawn_program(argv, d.path.string(), kMpiEnv);
   const std::string db = d.file("demcal.db");
-  bool running = false;
-  for (int i = 0; i < 3000 && !running; ++i) {
-    usleep(20000);
-    try {
-      running = fs::exists(db) && count_status(tasks_of(db, "gone"), "running") >= 1;
-    } catch (const std::exception&) {
-      // the file is there, its tables not yet
-    }
-  }
-  ASSERT_TRUE(running) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "gone")) << "no task was seen running within 60 s";
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
   const Result r = finish(pid, d.path.string());
   EXPECT_NE(r.rc, 0) << r.err;
@@ -184,16 +189,7 @@ TEST(Mpi, AnOutputFolderThatCannotBeWrittenStopsTheHandOut) {
   const pid_t pid = spawn_program({DEMCAL_MPIEXEC, "-np", "2", "--oversubscribe", DEMCAL_BIN, "run", "j.json", "--mpi"},
                                   d.path.string(), kMpiEnv);
   const std::string db = d.file("demcal.db");
-  bool running = false;
-  for (int i = 0; i < 3000 && !running; ++i) {
-    usleep(20000);
-    try {
-      running = fs::exists(db) && count_status(tasks_of(db, "nowhere"), "running") >= 1;
-    } catch (const std::exception&) {
-      // the file is there, its tables not yet
-    }
-  }
-  ASSERT_TRUE(running) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "nowhere")) << "no task was seen running within 60 s";
   const fs::path out = d.path / "demcal-out" / "nowhere";
   fs::rename(out, d.file("moved-away"));
   write(out.string(), "a file where the folder was\n");

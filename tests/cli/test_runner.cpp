@@ -286,6 +286,27 @@ TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
             std::string::npos) << r.err;
 }
 
+namespace {
+
+// A backup database (job "other", 2 tasks done) and a slow run of job "slow" into
+// demcal.db, seen with a task running: the scene of a database replaced mid-run.
+pid_t slow_run_beside_a_backup(const TempDir& d) {
+  write(d.file("other.json"), collision_job("other", {0.05, 0.06}));
+  EXPECT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
+  write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
+  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
+  EXPECT_TRUE(one_task_seen_running(d.file("demcal.db"), "slow")) << "no task was seen running within 60 s";
+  return runner;
+}
+
+// The backup copied over demcal.db, as a user restores one.
+void restore_backup(const TempDir& d) {
+  fs::copy_file(d.file("backup.db"), d.file("restore.tmp"));
+  fs::rename(d.file("restore.tmp"), d.file("demcal.db"));
+}
+
+}  // namespace
+
 // A backup copied over the database mid-run: the run stops, and its write-ahead log,
 // which SQLite leaves at the path because the file it belongs to moved, must not be
 // replayed into the backup by the next command (a read-only status did, and the
@@ -293,14 +314,9 @@ TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
 // saved beside it, and a merge brings them back.
 TEST(Runner, ADatabaseReplacedMidRunIsNotOverwrittenByTheRunsLog) {
   TempDir d;
-  write(d.file("other.json"), collision_job("other", {0.05, 0.06}));
-  ASSERT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
-  write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
   const std::string db = d.file("demcal.db");
-  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "slow")) << "no task was seen running within 60 s";
-  fs::copy_file(d.file("backup.db"), d.file("restore.tmp"));
-  fs::rename(d.file("restore.tmp"), db);
+  const pid_t runner = slow_run_beside_a_backup(d);
+  restore_backup(d);
   const Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
   EXPECT_NE(r.err.find("was replaced by another file while this run was writing it: the run stopped, and the old "
@@ -327,17 +343,12 @@ TEST(Runner, ADatabaseReplacedMidRunIsNotOverwrittenByTheRunsLog) {
 // to be replayed into the backup), so the log and its index are moved from the path.
 TEST(Runner, ADatabaseReplacedUnderAReaderIsNotOverwrittenByTheRunsLog) {
   TempDir d;
-  write(d.file("other.json"), collision_job("other", {0.05, 0.06}));
-  ASSERT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
-  write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
   const std::string db = d.file("demcal.db");
-  const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "slow")) << "no task was seen running within 60 s";
+  const pid_t runner = slow_run_beside_a_backup(d);
   sqlite3* reader = nullptr;
   ASSERT_EQ(sqlite3_open_v2(db.c_str(), &reader, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(reader, "BEGIN; SELECT count(*) FROM tasks;", nullptr, nullptr, nullptr), SQLITE_OK);
-  fs::copy_file(d.file("backup.db"), d.file("restore.tmp"));
-  fs::rename(d.file("restore.tmp"), db);
+  restore_backup(d);
   const Result r = finish(runner, d.path.string());
   sqlite3_exec(reader, "COMMIT", nullptr, nullptr, nullptr);
   sqlite3_close(reader);

@@ -64,13 +64,19 @@ TEST(WorkerResult, TruncatedOrIncompleteFileIsNoResult) {
 namespace demcal::jobs {
 namespace {
 
-TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
-  demcal::test::TempDir d;
+// A two-row series to write into task files.
+engine::Series energy_series() {
   engine::Series s;
   s.name = "energy";
   s.columns = {"time", "total"};
   s.units = {"s", "J"};
   s.rows = {{0.0, 1.0}, {1.0, 1.0}};
+  return s;
+}
+
+TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
+  demcal::test::TempDir d;
+  const engine::Series s = energy_series();
   // Written whole: the key and id are in it, no .part is left beside it.
   const std::string ok = d.file("1-abcdef01.h5");
   write_task_hdf5(ok, {"collision", "abcdef0123456789", 1, "failed", "unstable in stage run: energy grew"}, {{"seed", 1}}, {s}, {});
@@ -103,11 +109,7 @@ TEST(TaskFile, AFailedWriteSaysWhereAndWhyAndLeavesNothingThatLooksWhole) {
 // whether the file was cut short or is not HDF5 at all.
 TEST(TaskFile, ADamagedFileIsNamedWithWhatIsWrongWithIt) {
   demcal::test::TempDir d;
-  engine::Series s;
-  s.name = "energy";
-  s.columns = {"time", "total"};
-  s.units = {"s", "J"};
-  s.rows = {{0.0, 1.0}, {1.0, 1.0}};
+  const engine::Series s = energy_series();
   const std::string f = d.file("1-abcdef01.h5");
   write_task_hdf5(f, {"collision", "abcdef0123456789", 1, "done", ""}, {{"seed", 1}}, {s}, {});
   const auto size = std::filesystem::file_size(f);
