@@ -174,6 +174,17 @@ int slurm(SlurmArgs a) {
   if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))
     throw jobs::JobError("--demcal", fs::absolute(a.demcal).string() + " is not a file (give the demcal executable)");
   refuse_to_overwrite(a);
+  // The options were checked as typed; made absolute from the current folder, a
+  // newline in its path would end a line of the script (#SBATCH --output, the quoted
+  // variables) and the script would not even parse.
+  for (const auto& [flag, path] : {std::pair{std::string("--db"), fs::absolute(a.db).lexically_normal().string()},
+                                   std::pair{std::string(a.parts.empty() ? "--db" : "--parts"), parts.string()},
+                                   std::pair{std::string("JOB"), fs::absolute(a.job).lexically_normal().string()},
+                                   std::pair{std::string("--demcal"), a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string()
+                                                                                       : fs::absolute(a.demcal).string()}})
+    if (const std::string why = plain_path_error(path); !why.empty())
+      throw jobs::JobError(flag, path + ": " + why + " (a relative path takes the current folder's; run demcal slurm from "
+                                 "another folder, or give the path whole)");
   const std::string text = script(a, job);
   // Written beside its name and renamed: a failed write leaves an earlier script whole.
   jobs::PartFile file(a.out);

@@ -87,6 +87,9 @@ bool valid_utf8(const std::string& s) {
   return true;
 }
 
+
+}  // namespace
+
 std::string plain_path_error(const std::string& path) {
   if (path.empty()) return "empty path";
   for (const char ch : path)
@@ -95,8 +98,6 @@ std::string plain_path_error(const std::string& path) {
   if (!valid_utf8(path)) return "the path is not valid UTF-8";
   return "";
 }
-
-}  // namespace
 
 const CLI::Validator kPlainPath(plain_path_error, "PATH", "plain path");
 

@@ -37,6 +37,9 @@ void require_writable_file(const std::string& flag, const std::string& file);
 // UTF-8 (the path goes into JSON records, which must be UTF-8); kDbPath also
 // refuses the names SQLite would not read as a file (":memory:", "file:...").
 extern const CLI::Validator kPlainPath;
+// kPlainPath's check on a path built rather than typed (a relative one made absolute
+// from the current folder): "" when plain, else why not.
+std::string plain_path_error(const std::string& path);
 extern const CLI::Validator kDbPath;
 // One line of UTF-8 text (a chart title): gnuplot's title ends at a newline, and
 // the SVG must be valid.

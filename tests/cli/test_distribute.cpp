@@ -275,6 +275,16 @@ TEST(Distribute, SlurmScriptStepsRunLocallyEqualUnshardedRun) {
                  d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_NE(slurp(d.file("rel.sh")).find("DEMCAL='" + fs::canonical(d.file("sub/demcal")).string() + "'"), std::string::npos);
+  // A newline in the current folder's path, which relative options take on: refused
+  // (it wrote a script that did not parse, and exited 0).
+  const fs::path nl = d.path / "new\nline";
+  fs::create_directories(nl);
+  fs::copy_file(d.file("j.json"), nl / "j.json");
+  r = run_demcal({"slurm", "j.json", "--array", "2", "--out", "nl.sh"}, nl.string());
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("--db: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("a relative path takes the current folder's"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(nl / "nl.sh"));
 }
 
 TEST(Distribute, AnMpiTimeoutWithoutMpiIsRefused) {

@@ -231,7 +231,16 @@ TEST(WorkerResult, AResultThatCannotBeWrittenIsNamedAndLeavesNoTmp) {
   int st = 0;
   ASSERT_EQ(waitpid(pid, &st, 0), pid);
   const std::string why = worker_failure(st, t.result_path);
-  EXPECT_NE(why.find("could not write its result to " + t.result_path + " (disk full"), std::string::npos) << why;
+  EXPECT_NE(why.find("could not write its result to " + t.result_path + ": the metrics are lost (disk full"),
+            std::string::npos)
+      << why;
+  // The folder gone, or a file in its place: said, not "free space".
+  const std::string in_gone = d.file("gone/r.json");
+  EXPECT_NE(worker_failure(st, in_gone).find("(the folder is gone"), std::string::npos) << worker_failure(st, in_gone);
+  std::ofstream(d.file("plain")) << "x";
+  const std::string in_file = d.file("plain/r.json");
+  EXPECT_NE(worker_failure(st, in_file).find("(something else than a folder is at its path now"), std::string::npos)
+      << worker_failure(st, in_file);
   const pid_t other = fork();
   if (other == 0) _exit(7);
   ASSERT_EQ(waitpid(other, &st, 0), other);
