@@ -886,20 +886,20 @@ TEST(CalibrateCli, EnvelopeAcrossConfiningPressures) {
   // sigma1 all fall by 30 kPa: a negative intercept, a tension. Written as the angles
   // the envelope reads, sin phi = (s1 - s3) / (s1 + s3).
   std::string moved;
-  auto angle_sql = [&](std::int64_t id, double s3, double phi, double ds1) {
-    const double s1 = s3 * (1 + std::sin(phi * M_PI / 180)) / (1 - std::sin(phi * M_PI / 180)) + ds1;
+  auto angle_sql = [&](std::int64_t id, double s3, double phi_point, double ds1) {
+    const double s1 = s3 * (1 + std::sin(phi_point * M_PI / 180)) / (1 - std::sin(phi_point * M_PI / 180)) + ds1;
     const double moved_phi = std::asin((s1 - s3) / (s1 + s3)) * 180 / M_PI;
     moved += "UPDATE metrics SET value = " + std::to_string(moved_phi) + " WHERE name = 'phi_peak_deg' AND task_id = " +
              std::to_string(id) + "; ";
   };
   for (const auto& t : db::Store(db, true).tasks("mc")) {
     const auto q = nlohmann::json::parse(t.params_json);
-    const double th = q["theta_deg"], et = q["eta"], p0 = q["confining_kpa"];
-    if (th == 20 && et == 0.2) angle_sql(t.id, p0, phi_peak_fn(th, et), -30.0);
-    if (th == 20 && et == 0.1 && p0 == 50.0) failed = t.id;
-    if (th == 30 && et == 0.1 && p0 == 100.0) angle_sql(t.id, p0, phi_peak_fn(th, et), 10.0);  // off the line
-    if (th == 30 && et == 0.2) {
-      angle_sql(t.id, p0, phi_peak_fn(th, et), 50.0);
+    const double theta = q["theta_deg"], eta = q["eta"], p0 = q["confining_kpa"];
+    if (theta == 20 && eta == 0.2) angle_sql(t.id, p0, phi_peak_fn(theta, eta), -30.0);
+    if (theta == 20 && eta == 0.1 && p0 == 50.0) failed = t.id;
+    if (theta == 30 && eta == 0.1 && p0 == 100.0) angle_sql(t.id, p0, phi_peak_fn(theta, eta), 10.0);  // off the line
+    if (theta == 30 && eta == 0.2) {
+      angle_sql(t.id, p0, phi_peak_fn(theta, eta), 50.0);
       if (p0 == 200.0) warned = t.id;
     }
   }

@@ -837,8 +837,11 @@ TEST(TriaxialScene, ASeriesTooCoarseToJudgeSaysSo) {
   EXPECT_NE(r.outcome.message.find("shorter than triaxial.dilatancy_window (0.01): max_dilatancy_deg is not measured"),
             std::string::npos)
       << r.outcome.message;
-  for (const auto& kv : r.metrics())
-    if (kv.first == "phi_cv_se_deg") EXPECT_TRUE(std::isnan(kv.second));
+  for (const auto& kv : r.metrics()) {
+    if (kv.first == "phi_cv_se_deg") {
+      EXPECT_TRUE(std::isnan(kv.second));
+    }
+  }
 }
 
 TEST(TriaxialScene, TooLargeATimeStepIsRefused) {
