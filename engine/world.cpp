@@ -513,6 +513,9 @@ bool World::blocks_fit() const {
   return row_lo_.size() == nt + 1 && row_lo_[nt] == static_cast<int>(p_.size());
 }
 
+// Whether the blocks must be cut again: the list was rebuilt since, or they do not fit.
+bool World::blocks_stale() const { return nl_.builds() != blocks_builds_ || !blocks_fit(); }
+
 // First grain of a thread's block: the blocks of the last force evaluation, or an
 // even split before there are any.
 int World::block_lo(int tid) const {
@@ -566,7 +569,7 @@ void World::add_lower_buffers(int blk) {
 void World::begin_forces(bool rebuild, std::chrono::steady_clock::time_point& clock) {
   if (rebuild) nl_.build(p_, dom_, skin_, opt_.threads);
   update_wall_candidates();
-  if (nl_.builds() != blocks_builds_ || !blocks_fit()) assign_blocks();
+  if (blocks_stale()) assign_blocks();
   times_.neighbor += seconds_since(clock);
   clear_thread_sums();
 }
@@ -739,7 +742,7 @@ void World::step() {
   const bool listed = nl_.built_for(p_.size());
   bool finite = true;
   bool done = false;
-  if (listed && nl_.builds() == blocks_builds_ && blocks_fit() && !wall_candidates_stale()) {
+  if (listed && !blocks_stale() && !wall_candidates_stale()) {
     times_.integrate += seconds_since(clock);
     done = periodic ? drift_and_forces<true>(finite) : drift_and_forces<false>(finite);
     if (!done) finite = evaluate_forces(true, true);  // drifted; the list is stale

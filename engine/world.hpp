@@ -159,6 +159,7 @@ class World {
   void block_pairs(int blk, bool periodic, bool frictional);
   void add_lower_buffers(int blk);
   bool blocks_fit() const;
+  bool blocks_stale() const;
   int block_lo(int tid) const;
   bool wall_candidates_stale() const;
   void update_wall_candidates();
