@@ -95,11 +95,11 @@ void write_snapshot(H5::H5File& f, std::size_t step, const Snapshot& s) {
 
 // The error for a failed write, judged while its part file is still on disk.
 OutputWriteError write_failed(const std::string& path, const H5::Exception& e) {
-  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-  const bool full = !folder_takes_a_file(dir.empty() ? std::filesystem::path(".") : dir);
+  std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  const bool full = !folder_takes_a_file(dir);
   return OutputWriteError("cannot write the HDF5 file " + path + ": " + e.getDetailMsg() +
-                              (full ? " (the folder takes no further file: a full disk or quota, or the folder "
-                                      "removed or made read-only)"
+                              (full ? " (the folder takes no further file: " + why_folder_takes_no_file(dir) + ")"
                                     : " (is the disk full, or the folder not writable?)"),
                           full);
 }

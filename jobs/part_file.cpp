@@ -41,6 +41,15 @@ bool folder_takes_a_file(const std::filesystem::path& dir) {
   return ok;
 }
 
+std::string why_folder_takes_no_file(const std::filesystem::path& dir) {
+  std::error_code ec;
+  const auto st = std::filesystem::status(dir, ec);
+  if (st.type() == std::filesystem::file_type::not_found) return "the folder is gone: make it again and run the job again";
+  if (!ec && st.type() != std::filesystem::file_type::directory)
+    return "something else than a folder is at its path now: put the folder back and run the job again";
+  return "disk full, or the folder not writable: free space (or fix the folder) and run the job again";
+}
+
 void PartFile::commit(const std::string& what) {
   // On failure the part stays uncommitted, and the destructor removes it.
   if (std::rename(part_.c_str(), path_.c_str()) != 0)

@@ -28,6 +28,10 @@ class OutputWriteError : public std::runtime_error {
 // Whether `dir` takes a file of 64 KiB now (a full disk or quota, a read-only or
 // vanished folder does not). The probe file is removed.
 bool folder_takes_a_file(const std::filesystem::path& dir);
+// Why a folder took no file, as far as the folder itself tells: gone, replaced by
+// something else than a folder, or (it stands) a full disk or no permission; with
+// what to do.
+std::string why_folder_takes_no_file(const std::filesystem::path& dir);
 
 class PartFile {
  public:

@@ -146,21 +146,6 @@ bool worker_output_unwritable(int wait_status) {
          (WEXITSTATUS(wait_status) == kWorkerResultUnwritable || WEXITSTATUS(wait_status) == kWorkerOutputUnwritable);
 }
 
-namespace {
-
-// Why a file could not be written into `dir`, as far as the folder itself tells: gone,
-// replaced by a file, or (it stands) a full disk or no permission.
-std::string why_folder_takes_nothing(const std::filesystem::path& dir) {
-  std::error_code ec;
-  const auto st = std::filesystem::status(dir, ec);
-  if (st.type() == std::filesystem::file_type::not_found) return "the folder is gone: make it again and run the job again";
-  if (!ec && st.type() != std::filesystem::file_type::directory)
-    return "something else than a folder is at its path now: put the folder back and run the job again";
-  return "disk full, or the folder not writable: free space (or fix the folder) and run the job again";
-}
-
-}  // namespace
-
 std::string worker_failure(int wait_status, const std::string& result_path) {
   if (WIFSIGNALED(wait_status)) {
     const char* abbrev = sigabbrev_np(WTERMSIG(wait_status));
@@ -168,7 +153,7 @@ std::string worker_failure(int wait_status, const std::string& result_path) {
   }
   if (WIFEXITED(wait_status) && WEXITSTATUS(wait_status) == kWorkerResultUnwritable)
     return "the worker ran the task but could not write its result to " + result_path + ": the metrics are lost (" +
-           why_folder_takes_nothing(std::filesystem::path(result_path).parent_path()) + ")";
+           why_folder_takes_no_file(std::filesystem::path(result_path).parent_path()) + ")";
   return "worker exited with status " + std::to_string(WIFEXITED(wait_status) ? WEXITSTATUS(wait_status) : -1) +
          " without a result";
 }
