@@ -85,14 +85,16 @@ Store::Store(const std::string& path, bool read_only) : path_(path), conn_(check
   conn_.exec("PRAGMA synchronous = NORMAL");  // WAL + NORMAL: durable across process kills
   conn_.exec("PRAGMA foreign_keys = ON");
   migrate(conn_);
-  struct stat st {};
-  if (::stat(path_.c_str(), &st) == 0) {
-    dev_ = st.st_dev;
-    ino_ = st.st_ino;
-  }
+  db_id_ = FileId::of(path_);
   // The log and its index, made by migrate's first read.
-  if (::stat((path_ + "-wal").c_str(), &st) == 0) wal_id_ = {st.st_dev, st.st_ino};
-  if (::stat((path_ + "-shm").c_str(), &st) == 0) shm_id_ = {st.st_dev, st.st_ino};
+  wal_id_ = FileId::of(path_ + "-wal");
+  shm_id_ = FileId::of(path_ + "-shm");
+}
+
+Store::FileId Store::FileId::of(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return {};
+  return {static_cast<unsigned long long>(st.st_dev), static_cast<unsigned long long>(st.st_ino)};
 }
 
 Store::~Store() {
@@ -116,8 +118,7 @@ void Store::empty_log_of_lost_file() {
   // from the path (an opener of the new file pairs a log with an index), if they are
   // still this store's.
   const auto move_aside = [](const std::string& file, const FileId& id) {
-    struct stat st {};
-    if (id.ino != 0 && ::stat(file.c_str(), &st) == 0 && st.st_dev == id.dev && st.st_ino == id.ino)
+    if (id.ino != 0 && FileId::of(file) == id)
       std::rename(file.c_str(), (file + ".of-lost-file-" + std::to_string(::getpid())).c_str());
   };
   move_aside(path_ + "-wal", wal_id_);
@@ -145,12 +146,13 @@ std::string Store::save_lost_file() {
 }
 
 std::string Store::file_lost() const {
-  if (ino_ == 0) return "";  // never seen (read-only stores are not asked)
+  if (db_id_.ino == 0) return "";  // never seen (read-only stores are not asked)
   struct stat st {};
   // Only a name that is gone is a deleted file: a stat refused (a folder's permissions
   // changed, a network file system's hiccup) says nothing about it.
   if (::stat(path_.c_str(), &st) != 0) return errno == ENOENT || errno == ENOTDIR ? "deleted" : "";
-  if (st.st_dev != dev_ || st.st_ino != ino_) return "replaced by another file";
+  if (!(FileId{static_cast<unsigned long long>(st.st_dev), static_cast<unsigned long long>(st.st_ino)} == db_id_))
+    return "replaced by another file";
   return "";
 }
 

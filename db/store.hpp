@@ -137,11 +137,13 @@ class Store {
                    const char* note);
   std::string path_;
   Connection conn_;
+  // A file's identity (device, inode); ino 0: none seen.
   struct FileId {
     unsigned long long dev = 0, ino = 0;
+    static FileId of(const std::string& path);  // none where the path cannot be read
+    bool operator==(const FileId& o) const { return dev == o.dev && ino == o.ino; }
   };
-  unsigned long long dev_ = 0, ino_ = 0;  // the opened file's identity
-  FileId wal_id_, shm_id_;                // its write-ahead log's and the log index's
+  FileId db_id_, wal_id_, shm_id_;  // the opened file's, its write-ahead log's, the log index's
 };
 
 double unix_now();
