@@ -60,12 +60,37 @@ fs::path parts_folder(const SlurmArgs& a) {
 constexpr const char* kShebang = "#!/usr/bin/env bash";
 constexpr const char* kHeader = "# SLURM array job for demcal job";
 
-std::string script(const SlurmArgs& a, const jobs::Job& job) {
-  // Absolute: the script changes into the database's folder before running it.
-  const std::string demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
-  const fs::path db = fs::absolute(a.db).lexically_normal();
-  const fs::path workdir = db.parent_path();
-  const fs::path parts = parts_folder(a);
+// The paths the script names, absolute: it changes into the database's folder before
+// running anything.
+struct ScriptPaths {
+  std::string demcal;
+  fs::path job, db, workdir, parts;
+};
+
+// The options were checked as typed; made absolute from the current folder, a
+// newline in its path would end a line of the script (#SBATCH --output, the quoted
+// variables) and the script would not even parse: refused, naming the option.
+ScriptPaths script_paths(const SlurmArgs& a) {
+  ScriptPaths p;
+  p.demcal = a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string() : fs::weakly_canonical(fs::absolute(a.demcal)).string();
+  p.job = fs::absolute(a.job).lexically_normal();
+  p.db = fs::absolute(a.db).lexically_normal();
+  p.workdir = p.db.parent_path();
+  p.parts = parts_folder(a);
+  for (const auto& [flag, path] : {std::pair{std::string("--db"), p.db.string()},
+                                   std::pair{std::string(a.parts.empty() ? "--db" : "--parts"), p.parts.string()},
+                                   std::pair{std::string("JOB"), p.job.string()}, std::pair{std::string("--demcal"), p.demcal}})
+    if (const std::string why = plain_path_error(path); !why.empty())
+      throw jobs::JobError(flag, path + ": " + why + " (a relative path takes the current folder's; run demcal slurm from "
+                                 "another folder, or give the path whole)");
+  return p;
+}
+
+std::string script(const SlurmArgs& a, const jobs::Job& job, const ScriptPaths& paths) {
+  const std::string& demcal = paths.demcal;
+  const fs::path& db = paths.db;
+  const fs::path& workdir = paths.workdir;
+  const fs::path& parts = paths.parts;
   const std::string n = std::to_string(a.array);
   std::ostringstream s;
   s << kShebang << "\n"
@@ -87,7 +112,7 @@ std::string script(const SlurmArgs& a, const jobs::Job& job) {
     << sbatch_output_line(parts) << "\n"
     << "set -euo pipefail\n"
     << "DEMCAL=" << quote(demcal) << "\n"
-    << "JOB=" << quote(fs::absolute(a.job).lexically_normal().string()) << "\n"
+    << "JOB=" << quote(paths.job.string()) << "\n"
     << "WORKDIR=" << quote(workdir.string()) << "\n"
     << "PARTS=" << quote(parts.string()) << "\n"
     << "DB=" << quote(db.string()) << "\n"
@@ -174,18 +199,7 @@ int slurm(SlurmArgs a) {
   if (!a.demcal.empty() && !fs::is_regular_file(a.demcal))
     throw jobs::JobError("--demcal", fs::absolute(a.demcal).string() + " is not a file (give the demcal executable)");
   refuse_to_overwrite(a);
-  // The options were checked as typed; made absolute from the current folder, a
-  // newline in its path would end a line of the script (#SBATCH --output, the quoted
-  // variables) and the script would not even parse.
-  for (const auto& [flag, path] : {std::pair{std::string("--db"), fs::absolute(a.db).lexically_normal().string()},
-                                   std::pair{std::string(a.parts.empty() ? "--db" : "--parts"), parts.string()},
-                                   std::pair{std::string("JOB"), fs::absolute(a.job).lexically_normal().string()},
-                                   std::pair{std::string("--demcal"), a.demcal.empty() ? fs::read_symlink("/proc/self/exe").string()
-                                                                                       : fs::absolute(a.demcal).string()}})
-    if (const std::string why = plain_path_error(path); !why.empty())
-      throw jobs::JobError(flag, path + ": " + why + " (a relative path takes the current folder's; run demcal slurm from "
-                                 "another folder, or give the path whole)");
-  const std::string text = script(a, job);
+  const std::string text = script(a, job, script_paths(a));
   // Written beside its name and renamed: a failed write leaves an earlier script whole.
   jobs::PartFile file(a.out);
   {
