@@ -167,6 +167,8 @@ StepForecast forecast_step(LimitInputs in, double d_min, double d_max, double de
   StepForecast f;
   f.dt = explicit_dt > 0.0 ? explicit_dt : timestep_from_factor(dt_factor, in.m_min, in.law.kn);
   f.dt_critical = lim.governing().dt_critical;
+  f.m_min = in.m_min;
+  f.inertia_min = 0.4 * in.m_min * in.r_min * in.r_min;
   f.mode = lim.governing().mode + " mode (" + lim.governing().contact + ")";
   return f;
 }

@@ -53,6 +53,7 @@ double timestep_from_factor(double factor, double m_min, double kn);
 // contacts it then has, can only be stricter. For job validation.
 struct StepForecast {
   double dt = 0.0, dt_critical = 0.0;
+  double m_min = 0.0, inertia_min = 0.0;  // the smallest grain's mass and moment of inertia
   std::string mode;    // the governing mode and contact
   bool refused = true;  // false where the scene runs past the limit on purpose (a stability study)
   bool exceeds() const { return dt > dt_critical; }

@@ -176,30 +176,23 @@ void read_settings(const nlohmann::json& j, Job& job) {
 }
 
 // The critical step came out 0 s (or not a number): names the input to blame, the
-// grains' density when the smallest grain's mass or moment of inertia is out of range,
-// else material.kn (kn / m overflows).
+// grains' density (the field the scene takes it from) when the smallest grain's mass
+// or moment of inertia is out of range, else material.kn (kn / m overflows).
 [[noreturn]] void refuse_zero_critical_step(const SceneDef& scene, const Task& t, const engine::StepForecast& f) {
   const nlohmann::json& p = t.params;
-  const auto number = [&](const char* key, double fallback) {
-    return p.contains(key) && p.at(key).is_number() ? p.at(key).get<double>() : fallback;
-  };
-  const double d = number("d_min", 0.0);
-  double rho = number("density", 0.0);
   std::string field = "material.density", what = "density";
   if (p.contains("scaled_density")) {
-    rho = number("scaled_density", 0.0);
     field = scene.name + ".scaled_density";
     what = "scaled density";
   } else if (p.contains("density_scale")) {
-    rho *= number("density_scale", 1.0);
     field = scene.name + ".density_scale";
     what = "density (material.density x density_scale)";
   }
-  const double m = rho * M_PI * d * d * d / 6.0, inertia = 0.1 * m * d * d;
+  const double m = f.m_min;
   std::ostringstream crit;
   crit << std::setprecision(4) << f.dt_critical;
   const std::string head = "task #" + std::to_string(t.index) + ": the critical time step works out to " + crit.str() + " s: ";
-  if (!(std::isnormal(m) && std::isnormal(inertia)))
+  if (!(std::isnormal(m) && std::isnormal(f.inertia_min)))
     throw JobError(field, head + "the smallest grain's mass or moment of inertia is not a normal positive number "
                                  "(density x pi d_min^3 / 6, and 0.1 of that x d_min^2); check the " + what +
                                  " and the diameters");
