@@ -1,9 +1,12 @@
 #include "schema.hpp"
 
+#include <sqlite3.h>
+
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <sys/stat.h>
 #include <vector>
 
@@ -92,31 +95,42 @@ void check_header(const std::string& path) {
     throw DbError(path + " is not a SQLite database (and was left untouched)", true);
 }
 
-// The tables each schema version has, and the columns demcal reads in each. A demcal
-// file that lacks one (a table or column dropped by hand, a version reset) would fail
-// half-way through a run, after writing to it: refused up front instead. (Columns
-// added by hand are left alone.)
+// The tables and columns a file of schema `version` has, in the order the migrations
+// make them: built in memory from kMigrations, so that the check below follows the
+// schema without a list of its own to keep in step.
 struct TableColumns {
-  const char* table;
-  std::vector<const char*> columns;
-  int since;  // the schema version that made it
+  std::string table;
+  std::vector<std::string> columns;
 };
-const std::vector<TableColumns>& demcal_tables() {
-  static const std::vector<TableColumns> tables = {
-      {"jobs", {"id", "name", "spec_json", "created_at", "updated_at"}, 1},
-      {"tasks",
-       {"id", "job_id", "scene", "params_json", "key", "status", "attempts", "worker", "pid", "started_at",
-        "finished_at", "wall_s", "error"},
-       1},
-      {"job_tasks", {"job_id", "idx", "task_id"}, 1},
-      {"metrics", {"task_id", "name", "value"}, 1},
-      {"artifacts", {"task_id", "kind", "path"}, 1},
-      {"fits", {"id", "created_at", "targets_json", "method", "result_json"}, 1},
-      {"runners", {"token", "last_seen"}, 2},
+std::vector<TableColumns> schema_tables(int version) {
+  sqlite3* db = nullptr;
+  std::vector<TableColumns> out;
+  const auto texts = [&](const char* sql, const std::string& bind) {
+    std::vector<std::string> v;
+    sqlite3_stmt* st = nullptr;
+    if (sqlite3_prepare_v2(db, sql, -1, &st, nullptr) != SQLITE_OK) throw std::logic_error(sqlite3_errmsg(db));
+    if (!bind.empty()) sqlite3_bind_text(st, 1, bind.c_str(), -1, SQLITE_TRANSIENT);
+    while (sqlite3_step(st) == SQLITE_ROW) v.emplace_back(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)));
+    sqlite3_finalize(st);
+    return v;
   };
-  return tables;
+  try {
+    if (sqlite3_open(":memory:", &db) != SQLITE_OK) throw std::logic_error("cannot open an in-memory database");
+    for (int v = 0; v < version; ++v)
+      if (sqlite3_exec(db, kMigrations[v], nullptr, nullptr, nullptr) != SQLITE_OK) throw std::logic_error(sqlite3_errmsg(db));
+    for (const auto& t : texts("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY rowid", ""))
+      out.push_back({t, texts("SELECT name FROM pragma_table_info(?) ORDER BY cid", t)});
+  } catch (...) {
+    sqlite3_close(db);
+    throw;
+  }
+  sqlite3_close(db);
+  return out;
 }
 
+// A demcal file that lacks a table or a column of its schema version (dropped by hand,
+// a version reset) would fail half-way through a run, after writing to it: refused
+// up front instead. (Columns added by hand are left alone.)
 void require_tables(Connection& c, const std::string& path, int version, int tables) {
   if (version == 0) {
     if (tables > 0)
@@ -126,15 +140,14 @@ void require_tables(Connection& c, const std::string& path, int version, int tab
   const std::string where = " (schema version " + std::to_string(version) + "; left untouched)";
   Statement q = c.prepare("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?");
   Statement cols = c.prepare("SELECT count(*) FROM pragma_table_info(?) WHERE name = ?");
-  for (const auto& t : demcal_tables()) {
-    if (t.since > version) continue;
+  for (const auto& t : schema_tables(version)) {
     q.reset();
-    q.bind(1, std::string(t.table));
+    q.bind(1, t.table);
     if (!q.step() || q.int64(0) == 0)
       throw DbError(path + " is a damaged demcal database: table " + t.table + " is missing" + where, true);
-    for (const char* column : t.columns) {
+    for (const std::string& column : t.columns) {
       cols.reset();
-      cols.bind(1, std::string(t.table)).bind(2, std::string(column));
+      cols.bind(1, t.table).bind(2, column);
       if (!cols.step() || cols.int64(0) == 0)
         throw DbError(path + " is a damaged demcal database: table " + t.table + " has no column " + column + where,
                       true);
