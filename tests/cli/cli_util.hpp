@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +14,7 @@
 #include <sstream>
 #include <string>
 #include <sys/wait.h>
+#include <thread>
 #include <unistd.h>
 #include <vector>
 
@@ -96,6 +98,26 @@ inline std::string collision_job(const std::string& name, const std::vector<doub
 inline std::vector<db::TaskRow> tasks_of(const std::string& db, const std::string& job = "") {
   db::Store s(db, true);
   return s.tasks(job);
+}
+
+inline int count_status(const std::vector<db::TaskRow>& rows, const std::string& status) {
+  int n = 0;
+  for (const auto& r : rows) n += r.status == status;
+  return n;
+}
+
+// Waits (up to 60 s) until a task of `job` in `db` is running; false if none was seen.
+inline bool task_seen_running(const std::string& db, const std::string& job) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      if (fs::exists(db) && count_status(tasks_of(db, job), "running") >= 1) return true;
+    } catch (const std::exception&) {
+      // the runner has made the file but not yet its tables
+    }
+  }
+  return false;
 }
 
 }  // namespace demcal::test

@@ -23,26 +23,6 @@ Result mpirun(int ranks, const std::vector<std::string>& mpi_flags, const std::v
   return run_program(argv, dir, env);
 }
 
-int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string& status) {
-  int n = 0;
-  for (const auto& r : rows) n += r.status == status;
-  return n;
-}
-
-// Whether a task of `job` was seen running in `db` within 60 s (the file may be there
-// before its tables are).
-bool task_seen_running(const std::string& db, const std::string& job) {
-  for (int i = 0; i < 3000; ++i) {
-    usleep(20000);
-    try {
-      if (fs::exists(db) && count_status(tasks_of(db, job), "running") >= 1) return true;
-    } catch (const std::exception&) {
-      // the file is there, its tables not yet
-    }
-  }
-  return false;
-}
-
 }  // namespace
 
 TEST(Mpi, FarmEqualsLocalRunBitForBit) {

@@ -12,28 +12,6 @@
 
 using namespace demcal::test;
 
-namespace {
-int count_status(const std::vector<demcal::db::TaskRow>& rows, const std::string& status) {
-  int n = 0;
-  for (const auto& r : rows) n += r.status == status;
-  return n;
-}
-
-// Waits (up to 60 s) until one task of `job` in `db` is running; false if none was seen.
-bool one_task_seen_running(const std::string& db, const std::string& job) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    try {
-      if (fs::exists(db) && count_status(tasks_of(db, job), "running") == 1) return true;
-    } catch (const std::exception&) {
-      // the runner has made the file but not yet its tables
-    }
-  }
-  return false;
-}
-}  // namespace
-
 TEST(Runner, CrashingWorkerFailsOnlyItsTask) {
   TempDir d;
   write(d.file("j.json"), collision_job("crash", {0.05, 0.1, 0.2}));
@@ -139,7 +117,7 @@ TEST(Runner, SigtermStopsRunningTasksForRetry) {
   write(d.file("j.json"), collision_job("term", {0.05, 0.06, 0.07, 0.08}, 150, 60000));  // long enough that the task seen running is still running at SIGTERM under load
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "term")) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "term")) << "no task was seen running within 60 s";
   kill(runner, SIGTERM);
   const Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
@@ -163,7 +141,7 @@ TEST(Runner, SighupStopsRunningTasksForRetryUnlessIgnored) {
   write(d.file("j.json"), collision_job("hup", {0.05, 0.06, 0.07, 0.08}, 150, 60000));
   const std::string db = d.file("demcal.db");
   pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "hup")) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "hup")) << "no task was seen running within 60 s";
   kill(runner, SIGHUP);
   Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
@@ -174,7 +152,7 @@ TEST(Runner, SighupStopsRunningTasksForRetryUnlessIgnored) {
   EXPECT_GE(count_status(rows, "pending"), 1);
   // `trap '' HUP` is what nohup does: the run ignores the hangup and finishes.
   runner = spawn_program({"bash", "-c", "trap '' HUP; exec \"$0\" run j.json --workers 1", DEMCAL_BIN}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "hup")) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "hup")) << "no task was seen running within 60 s";
   kill(runner, SIGHUP);
   r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 0) << r.err;
@@ -253,7 +231,7 @@ TEST(Runner, AnOutputFolderThatCannotBeWrittenStopsTheRun) {
   write(d.file("j.json"), collision_job("gone", {0.05, 0.06, 0.07, 0.08, 0.09}, 150, 30000));
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "gone")) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "gone")) << "no task was seen running within 60 s";
   const fs::path out = fs::path(d.file("demcal-out")) / "gone";
   fs::rename(out, d.file("moved-away"));
   write(out.string(), "a file where the folder was\n");
@@ -278,7 +256,7 @@ TEST(Runner, ADatabaseDeletedMidRunStopsTheRunLoudly) {
   write(d.file("j.json"), collision_job("lost", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
   const std::string db = d.file("demcal.db");
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  ASSERT_TRUE(one_task_seen_running(db, "lost")) << "no task was seen running within 60 s";
+  ASSERT_TRUE(task_seen_running(db, "lost")) << "no task was seen running within 60 s";
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
   const Result r = finish(runner, d.path.string());
   EXPECT_EQ(r.rc, 1) << r.err;
@@ -295,7 +273,7 @@ pid_t slow_run_beside_a_backup(const TempDir& d) {
   EXPECT_EQ(run_demcal({"run", "other.json", "--db", "backup.db", "--workers", "1"}, d.path.string()).rc, 0);
   write(d.file("j.json"), collision_job("slow", {0.05, 0.06, 0.07, 0.08, 0.09, 0.1}, 150, 60000));
   const pid_t runner = spawn({"run", "j.json", "--workers", "1"}, d.path.string());
-  EXPECT_TRUE(one_task_seen_running(d.file("demcal.db"), "slow")) << "no task was seen running within 60 s";
+  EXPECT_TRUE(task_seen_running(d.file("demcal.db"), "slow")) << "no task was seen running within 60 s";
   return runner;
 }
 
