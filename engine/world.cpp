@@ -137,6 +137,12 @@ struct VerletArrays {
   }
 };
 
+// The components of an array of Vec3 as one flat array of doubles (x0 y0 z0 x1 ...),
+// for a loop that moves them one by one. Null for an empty array: its data() may be
+// null, and ->data() through a null pointer is undefined.
+double* flat(std::vector<Vec3>& v) { return v.empty() ? nullptr : v.data()->data(); }
+const double* flat(const std::vector<Vec3>& v) { return v.empty() ? nullptr : v.data()->data(); }
+
 // Scatters a finished batch: forces and torques onto the grains, history back into
 // the list, the largest overlap into the thread's accumulator. A frictionless batch
 // has forces along the normal only: no torques, no history.
@@ -209,11 +215,11 @@ void World::force_range(int begin, int end, const ForceSink& out, ThreadAcc& acc
 
   // Plain doubles, not Vec3: the components go one by one into the batch's arrays
   // (through Eigen's 2 + 1 lane packing each took a shuffle; 0.5% of the run).
-  const double* x = p_.x.data()->data();
-  const double* v = p_.v.data()->data();
-  const double* w = p_.w.data()->data();
-  double* fs = FS->data();
-  double* mr = MR->data();
+  const double* x = flat(p_.x);
+  const double* v = flat(p_.v);
+  const double* w = flat(p_.w);
+  double* fs = flat(nl_.fs);
+  double* mr = flat(nl_.mr);
   const int* S = nl_.start.data();
   for (int i = begin; i < end; ++i) {
     const double xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
