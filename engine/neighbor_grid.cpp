@@ -97,27 +97,58 @@ int neighbour_cells(const Grid& g, int cx, int cy, int cz, int* out) {
   return count;
 }
 
+// Particles sorted into the grid's cells by a counting sort (stable: the order
+// within a cell is the grains' order, so the list is deterministic).
+struct CellSort {
+  std::vector<int> cell_of, cell_start, items;
+};
+
+CellSort sort_into_cells(const Particles& p, const Grid& g) {
+  const int n = static_cast<int>(p.size());
+  CellSort cs{std::vector<int>(n), std::vector<int>(g.n[0] * g.n[1] * g.n[2] + 1, 0), std::vector<int>(n)};
+  for (int i = 0; i < n; ++i) {
+    cs.cell_of[i] = g.index(p.x[i]);
+    ++cs.cell_start[cs.cell_of[i] + 1];
+  }
+  std::partial_sum(cs.cell_start.begin(), cs.cell_start.end(), cs.cell_start.begin());
+  std::vector<int> fill(cs.cell_start.begin(), cs.cell_start.end() - 1);
+  for (int i = 0; i < n; ++i) cs.items[fill[cs.cell_of[i]]++] = i;
+  return cs;
+}
+
+// Appends to `out` the candidates j > i of grain i within reach (radii plus skin),
+// sorted by j, and returns how many.
+int candidate_row(const Particles& p, const Domain& dom, const Grid& g, const CellSort& cs, double skin, int i,
+                  std::vector<int>& out) {
+  int cells[27];
+  const int c = cs.cell_of[i];
+  const int cx = c % g.n[0], cy = (c / g.n[0]) % g.n[1], cz = c / (g.n[0] * g.n[1]);
+  const int nc = neighbour_cells(g, cx, cy, cz, cells);
+  const std::size_t row_begin = out.size();
+  for (int k = 0; k < nc; ++k) {
+    for (int s = cs.cell_start[cells[k]]; s < cs.cell_start[cells[k] + 1]; ++s) {
+      const int jj = cs.items[s];
+      if (jj <= i || (p.fixed[i] && p.fixed[jj])) continue;
+      Vec3 d = p.x[jj] - p.x[i];
+      dom.min_image(d);
+      const double reach = p.r[i] + p.r[jj] + skin;
+      if (d.squaredNorm() < reach * reach) out.push_back(jj);
+    }
+  }
+  std::sort(out.begin() + static_cast<long>(row_begin), out.end());
+  return static_cast<int>(out.size() - row_begin);
+}
+
 }  // namespace
 
 void NeighborList::build(const Particles& p, const Domain& dom, double skin, int threads) {
   const int n = static_cast<int>(p.size());
   const double rmax = n ? *std::max_element(p.r.begin(), p.r.end()) : 0.0;
   const Grid g = make_grid(p, dom, 2.0 * rmax + skin);
-  const int ncells = g.n[0] * g.n[1] * g.n[2];
+  const CellSort cells = sort_into_cells(p, g);
 
-  // Counting sort of particles into cells (stable: deterministic order).
-  std::vector<int> cell_of(n), cell_start(ncells + 1, 0), cell_items(n);
-  for (int i = 0; i < n; ++i) {
-    cell_of[i] = g.index(p.x[i]);
-    ++cell_start[cell_of[i] + 1];
-  }
-  std::partial_sum(cell_start.begin(), cell_start.end(), cell_start.begin());
-  {
-    std::vector<int> fill(cell_start.begin(), cell_start.end() - 1);
-    for (int i = 0; i < n; ++i) cell_items[fill[cell_of[i]]++] = i;
-  }
-
-  // New rows, one per particle, sorted by j.
+  // New rows, one per particle; each thread fills the rows of its static share in
+  // order, so concatenating the threads' parts gives the rows in grain order.
   std::vector<int> counts(n + 1, 0);
   std::vector<std::vector<int>> chunk_j(std::max(1, threads));
 #pragma omp parallel num_threads(std::max(1, threads))
@@ -126,27 +157,8 @@ void NeighborList::build(const Particles& p, const Domain& dom, double skin, int
 #ifdef _OPENMP
     tid = omp_get_thread_num();
 #endif
-    std::vector<int>& out = chunk_j[tid];
-    int cells[27];
 #pragma omp for schedule(static)
-    for (int i = 0; i < n; ++i) {
-      const int c = cell_of[i];
-      const int cx = c % g.n[0], cy = (c / g.n[0]) % g.n[1], cz = c / (g.n[0] * g.n[1]);
-      const int nc = neighbour_cells(g, cx, cy, cz, cells);
-      const std::size_t row_begin = out.size();
-      for (int k = 0; k < nc; ++k) {
-        for (int s = cell_start[cells[k]]; s < cell_start[cells[k] + 1]; ++s) {
-          const int jj = cell_items[s];
-          if (jj <= i || (p.fixed[i] && p.fixed[jj])) continue;
-          Vec3 d = p.x[jj] - p.x[i];
-          dom.min_image(d);
-          const double reach = p.r[i] + p.r[jj] + skin;
-          if (d.squaredNorm() < reach * reach) out.push_back(jj);
-        }
-      }
-      std::sort(out.begin() + static_cast<long>(row_begin), out.end());
-      counts[i + 1] = static_cast<int>(out.size() - row_begin);
-    }
+    for (int i = 0; i < n; ++i) counts[i + 1] = candidate_row(p, dom, g, cells, skin, i, chunk_j[tid]);
   }
   std::vector<int> new_start(n + 1, 0);
   std::partial_sum(counts.begin(), counts.end(), new_start.begin());
@@ -154,11 +166,21 @@ void NeighborList::build(const Particles& p, const Domain& dom, double skin, int
   new_j.reserve(new_start[n]);
   for (auto& c : chunk_j) new_j.insert(new_j.end(), c.begin(), c.end());
 
-  // Carry the history of live contacts over: merge old and new rows by j.
+  carry_history(new_start, new_j, threads);
+  start.swap(new_start);
+  j.swap(new_j);
+  x_build_ = p.x;
+  r_build_ = p.r;
+  ++builds_;
+}
+
+// The history of contacts live in the old list moves to the same pair in the new
+// one (rows merged by j); pairs new to the list start untouched.
+void NeighborList::carry_history(const std::vector<int>& new_start, const std::vector<int>& new_j, int threads) {
+  const int n = static_cast<int>(new_start.size()) - 1;
   std::vector<Vec3> new_fs(new_j.size(), Vec3::Zero()), new_mr(new_j.size(), Vec3::Zero());
   std::vector<std::uint8_t> new_touch(new_j.size(), 0);
-  const bool have_old = static_cast<int>(start.size()) == n + 1;
-  if (have_old) {
+  if (static_cast<int>(start.size()) == n + 1) {
 #pragma omp parallel for schedule(static) num_threads(std::max(1, threads))
     for (int i = 0; i < n; ++i) {
       int a = start[i], ae = start[i + 1];
@@ -172,14 +194,9 @@ void NeighborList::build(const Particles& p, const Domain& dom, double skin, int
       }
     }
   }
-  start.swap(new_start);
-  j.swap(new_j);
   fs.swap(new_fs);
   mr.swap(new_mr);
   touching.swap(new_touch);
-  x_build_ = p.x;
-  r_build_ = p.r;
-  ++builds_;
 }
 
 bool NeighborList::needs_rebuild(const Particles& p, const Domain& dom, double skin, int threads) const {

@@ -45,6 +45,8 @@ class NeighborList {
   long builds() const { return builds_; }
 
  private:
+  void carry_history(const std::vector<int>& new_start, const std::vector<int>& new_j, int threads);
+
   std::vector<Vec3> x_build_;
   std::vector<double> r_build_;
   long builds_ = 0;

@@ -197,6 +197,13 @@ double least_periodic_depth_diameters(const Material& m) {
 
 void ReposeConfig::validate() const {
   material.validate();
+  validate_protocol();
+  validate_profile();
+  validate_geometry();
+}
+
+// The column, the floor and the stages' thresholds and limits, field by field.
+void ReposeConfig::validate_protocol() const {
   positive(column_width, "repose.column_width");
   positive(column_height, "repose.column_height");
   positive(slab_depth_diameters, "repose.slab_depth_diameters");
@@ -232,6 +239,11 @@ void ReposeConfig::validate() const {
   if (dt == 0.0) positive(dt_factor, "numerics.dt_factor");
   positive(gravity, "repose.gravity");
   if (!std::isfinite(energy_guard)) throw ConfigError("numerics.energy_guard", "must be finite");
+  if (threads < 1) throw ConfigError("threads", "must be at least 1");
+}
+
+// How the heap's profile is binned and fitted.
+void ReposeConfig::validate_profile() const {
   non_negative(bin_width, "repose.bin_width");
   // The profile bins grains by their centres: a bin narrower than the smallest grain
   // is often empty, and the fit's walk down the slope stops at the first empty bin
@@ -246,7 +258,10 @@ void ReposeConfig::validate() const {
   non_negative(steep_window, "repose.steep_window");
   positive(front_min_height, "repose.front_min_height");
   non_negative(front_max_gap, "repose.front_max_gap");
-  if (threads < 1) throw ConfigError("threads", "must be at least 1");
+}
+
+// Whether the slab, the column and the grain count fit the grains' sizes.
+void ReposeConfig::validate_geometry() const {
   const double d_mean = material.grading().mean();
   const double depth = slab_depth_diameters * d_mean;
   const double reach = interaction_reach(material);

@@ -154,6 +154,11 @@ struct ReposeConfig {
   double column_bins() const;
   static constexpr double kWeightOverlapNote = 0.02;  // validate notes above this
   bool profile_check_has_no_room() const { return rest_profile_window > 0.0 && time_limit < profile_check_time(); }
+
+ private:
+  void validate_protocol() const;  // validate()'s parts
+  void validate_profile() const;
+  void validate_geometry() const;
 };
 
 struct ReposeResult {
