@@ -73,16 +73,94 @@ void print_fit(std::ostream& out, const calibrate::Calibration& cal, std::int64_
   for (const auto& u : r.unreachable) out << "unreachable: " << u << "\n";
 }
 
+struct FitArgs {
+  std::string db = "demcal.db", out, format = "text";
+  std::vector<std::string> targets, sigmas, jobs, where;
+  int refine = 0, workers = 0;
+};
+
+calibrate::FitRequest fit_request(const FitArgs& a) {
+  if (a.format != "text" && a.format != "json")
+    throw jobs::JobError("--format", "expected text or json, got \"" + a.format + "\"");
+  calibrate::FitRequest req;
+  for (const auto& t : a.targets) req.targets.push_back(calibrate::parse_target(t));
+  for (const auto& s : a.sigmas) calibrate::apply_sigma(req.targets, s);
+  for (const auto& w : a.where) req.where.push_back(jobs::parse_where(w));
+  req.jobs = a.jobs;
+  return req;
+}
+
+std::vector<calibrate::RefineRound> refine_fit(db::Store& store, const calibrate::FitRequest& req,
+                                               calibrate::Calibration& cal, const FitArgs& a,
+                                               const std::string& out_dir) {
+  if (a.refine <= 0 || !cal.result.ok) return {};
+  calibrate::RefineOptions ro;
+  ro.rounds = a.refine;
+  ro.log = &std::cerr;
+  ro.run_points = calibrate::dem_point_runner(out_dir, a.workers, &std::cerr, req.where);
+  ro.resume_round = calibrate::dem_round_resumer(out_dir, a.workers, &std::cerr);
+  return calibrate::refine(store, req, cal, ro);
+}
+
+void print_rounds(std::ostream& out, const std::vector<calibrate::RefineRound>& rounds, bool unsettled,
+                  double tolerance) {
+  for (const auto& r : rounds)
+    out << "refine round " << r.round << ": "
+        << (r.resumed ? std::string("resumed") : std::to_string(r.points.size()) + " run(s)")
+        << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta)
+        << (std::isfinite(r.move) ? "; moved " + g(100 * r.move, 3) + "% of the range" : std::string("; no answer"))
+        << " (fit " << r.fit_id << ")\n";
+  if (unsettled)
+    out << "warning: the refinement stopped after its " << rounds.size()
+        << " round(s) with the candidate still moving (" << g(100 * rounds.back().move, 3)
+        << "% of the range in the last round; under " << g(100 * tolerance, 3)
+        << "% counts as settled): the answer is not settled yet; run more rounds (--refine N)\n";
+}
+
+int run_fit(const FitArgs& a) {
+  const calibrate::FitRequest req = fit_request(a);
+  require_db(a.db);
+  // Opened read-only first: a foreign, newer or empty file is reported before
+  // the read-write open would give it a schema.
+  const std::string out_dir = a.out.empty() ? default_out_dir(a.db) : a.out;
+  if (a.refine > 0) require_writable_dir(out_flag(a.out), out_dir);
+  { db::Store probe(a.db, /*read_only=*/true); }
+  // A database demcal may not write still answers: the fit is printed, not stored.
+  const std::string refusal = db::write_refusal(a.db);
+  if (!refusal.empty() && a.refine > 0)
+    throw jobs::JobError("--refine", "stores its runs in " + a.db + ", which cannot be written: " + refusal);
+  db::Store store(a.db, /*read_only=*/!refusal.empty());
+  calibrate::Calibration cal = calibrate::calibrate(store, req);
+  std::int64_t id = refusal.empty() ? calibrate::store_fit(store, req, cal, 0) : -1;
+  if (id < 0) std::cerr << "demcal: warning: the fit is not stored: " << a.db << " cannot be written (" << refusal << ")\n";
+  const std::vector<calibrate::RefineRound> rounds = refine_fit(store, req, cal, a, out_dir);
+  if (!rounds.empty()) id = rounds.back().fit_id;
+  // Rounds that ended because none were left, the candidate still moving: the
+  // answer is not settled, whatever its region says.
+  const double tolerance = calibrate::RefineOptions{}.tolerance;
+  const bool unsettled = !rounds.empty() && rounds.back().ok && !(rounds.back().move < tolerance);
+  if (a.format == "json") {
+    nlohmann::json j =
+        id < 0 ? calibrate::fit_record(req, cal, 0).result : nlohmann::json::parse(store.fits().back().result_json);
+    j["fit_id"] = id < 0 ? nlohmann::json(nullptr) : nlohmann::json(id);
+    if (!rounds.empty()) j["refine_converged"] = !unsettled;
+    std::cout << j.dump(2) << "\n";
+  } else {
+    print_fit(std::cout, cal, id);
+    print_rounds(std::cout, rounds, unsettled, tolerance);
+  }
+  if (!cal.result.ok) {
+    std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";
+    return kRuntime;
+  }
+  return kOk;
+}
+
 }  // namespace
 
 void add_fit(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("fit", "Invert target angles into (theta, eta) from the stored grid results");
-  struct Args {
-    std::string db = "demcal.db", out, format = "text";
-    std::vector<std::string> targets, sigmas, jobs, where;
-    int refine = 0, workers = 0;
-  };
-  auto a = std::make_shared<Args>();
+  auto a = std::make_shared<FitArgs>();
   cmd->add_option("--target", a->targets, "METRIC=VALUE (phi_peak, phi_cv, phi_diff, repose, or a stored metric); repeatable")
       ->required();
   cmd->add_option("--sigma", a->sigmas, "METRIC=SIGMA: the target's own uncertainty (e.g. the laboratory's), added in quadrature to the surrogate's error (default: 0, an exact target)");
@@ -94,69 +172,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "HDF5 output directory for --refine (default: demcal-out next to the database)")->check(kPlainPath);
   cmd->add_option("--format", a->format, "text or json")->capture_default_str();
   cmd->callback([a, &exit_code] {
-    const auto body = [&] {
-      if (a->format != "text" && a->format != "json")
-        throw jobs::JobError("--format", "expected text or json, got \"" + a->format + "\"");
-      calibrate::FitRequest req;
-      for (const auto& t : a->targets) req.targets.push_back(calibrate::parse_target(t));
-      for (const auto& s : a->sigmas) calibrate::apply_sigma(req.targets, s);
-      for (const auto& w : a->where) req.where.push_back(jobs::parse_where(w));
-      req.jobs = a->jobs;
-      require_db(a->db);
-      // Opened read-only first: a foreign, newer or empty file is reported before
-      // the read-write open would give it a schema.
-      const std::string out_dir = a->out.empty() ? default_out_dir(a->db) : a->out;
-      if (a->refine > 0) require_writable_dir(out_flag(a->out), out_dir);
-      { db::Store probe(a->db, /*read_only=*/true); }
-      // A database demcal may not write still answers: the fit is printed, not stored.
-      const std::string refusal = db::write_refusal(a->db);
-      if (!refusal.empty() && a->refine > 0)
-        throw jobs::JobError("--refine", "stores its runs in " + a->db + ", which cannot be written: " + refusal);
-      db::Store store(a->db, /*read_only=*/!refusal.empty());
-      calibrate::Calibration cal = calibrate::calibrate(store, req);
-      std::int64_t id = refusal.empty() ? calibrate::store_fit(store, req, cal, 0) : -1;
-      if (id < 0) std::cerr << "demcal: warning: the fit is not stored: " << a->db << " cannot be written (" << refusal << ")\n";
-      std::vector<calibrate::RefineRound> rounds;
-      if (a->refine > 0 && cal.result.ok) {
-        calibrate::RefineOptions ro;
-        ro.rounds = a->refine;
-        ro.log = &std::cerr;
-        ro.run_points = calibrate::dem_point_runner(out_dir, a->workers, &std::cerr, req.where);
-        ro.resume_round = calibrate::dem_round_resumer(out_dir, a->workers, &std::cerr);
-        rounds = calibrate::refine(store, req, cal, ro);
-        if (!rounds.empty()) id = rounds.back().fit_id;
-      }
-      // Rounds that ended because none were left, the candidate still moving: the
-      // answer is not settled, whatever its region says.
-      const double tolerance = calibrate::RefineOptions{}.tolerance;
-      const bool unsettled = !rounds.empty() && rounds.back().ok && !(rounds.back().move < tolerance);
-      if (a->format == "json") {
-        nlohmann::json j = id < 0 ? calibrate::fit_record(req, cal, 0).result
-                                  : nlohmann::json::parse(store.fits().back().result_json);
-        j["fit_id"] = id < 0 ? nlohmann::json(nullptr) : nlohmann::json(id);
-        if (!rounds.empty()) j["refine_converged"] = !unsettled;
-        std::cout << j.dump(2) << "\n";
-      } else {
-        print_fit(std::cout, cal, id);
-        for (const auto& r : rounds)
-          std::cout << "refine round " << r.round << ": "
-                    << (r.resumed ? std::string("resumed") : std::to_string(r.points.size()) + " run(s)")
-                    << "; candidate theta = " << g(r.theta) << ", eta = " << g(r.eta)
-                    << (std::isfinite(r.move) ? "; moved " + g(100 * r.move, 3) + "% of the range" : std::string("; no answer"))
-                    << " (fit " << r.fit_id << ")\n";
-        if (unsettled)
-          std::cout << "warning: the refinement stopped after its " << rounds.size()
-                    << " round(s) with the candidate still moving (" << g(100 * rounds.back().move, 3)
-                    << "% of the range in the last round; under " << g(100 * tolerance, 3)
-                    << "% counts as settled): the answer is not settled yet; run more rounds (--refine N)\n";
-      }
-      if (!cal.result.ok) {
-        std::cerr << "demcal: error: target out of reach of the grid: " << cal.result.unreachable.front() << "\n";
-        return kRuntime;
-      }
-      return kOk;
-    };
-    exit_code = guarded("", [&] { return chosen_job_errors(!a->jobs.empty(), body); });
+    exit_code = guarded("", [&] { return chosen_job_errors(!a->jobs.empty(), [&] { return run_fit(*a); }); });
   });
 }
 

@@ -20,14 +20,92 @@
 
 namespace demcal::cli {
 
+namespace {
+
+struct MapArgs {
+  std::string db = "demcal.db", job, metric, out, title;
+  std::vector<std::string> where;
+  bool no_fit = false;
+};
+
+// The grid points a map's reader should know of: holes, points short of replicas,
+// peaks on a spike.
+void print_map_points(const calibrate::ResponseSurface& rs) {
+  for (const auto& p : rs.points)
+    if (p.hole() && !p.refine)
+      std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.without_value() << ")\n";
+  for (const auto& p : rs.points)
+    if (p.partial())
+      std::cout << "short of replicas: theta = " << p.theta << ", eta = " << p.eta << " (the mean of " << p.n()
+                << "; " << p.without_value() << ")\n";
+  for (const auto& p : rs.points)
+    if (p.spiked > 0)
+      std::cout << "peak on a spike: theta = " << p.theta << ", eta = " << p.eta << " (" << p.spiked << " of "
+                << p.n() << " replica(s))\n";
+  if (rs.on_spike > 0)
+    std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
+              << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
+}
+
+// Whether the latest fit was drawn, and why not when the job has fits on other pins.
+void print_overlay_note(const std::optional<calibrate::MapOverlay>& overlay, int other_pins, const std::string& job,
+                        const std::string& pins) {
+  if (!overlay && other_pins > 0)
+    std::cout << "no fit drawn: job " << job << "'s " << other_pins << " fit(s) were made on other --where pins "
+              << "than this map's (" << (pins.empty() ? std::string("none") : pins)
+              << "); a fit is drawn on the map of the pins it was made on\n";
+  if (overlay)
+    std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
+              << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";
+}
+
+int run_map(const MapArgs& a) {
+  std::vector<jobs::Where> where;
+  for (const auto& w : a.where) where.push_back(jobs::parse_where(w));
+  const std::string out = a.out.empty() ? "map_" + a.metric + ".png" : a.out;
+  require_writable_file("--out", out);
+  require_db(a.db);
+  db::Store store(a.db, /*read_only=*/true);
+  const std::vector<std::string> jobs = a.job.empty() ? std::vector<std::string>{} : std::vector<std::string>{a.job};
+  const std::string job = calibrate::job_for_metric(store, a.metric, jobs, where, "--metric");
+  calibrate::GatherOptions go;
+  go.where = where;
+  const calibrate::ResponseSurface rs = calibrate::gather(store, job, a.metric, go);
+  calibrate::Surrogate s;
+  try {
+    s = calibrate::fit_surrogate(rs);
+  } catch (const std::invalid_argument& e) {
+    throw jobs::JobError("--job", "job \"" + job + "\", " + a.metric + ": " + e.what());
+  }
+  std::optional<calibrate::MapOverlay> overlay;
+  int other_pins = 0;
+  if (!a.no_fit) overlay = calibrate::latest_fit_overlay(store, job, a.metric, where, &other_pins);
+  std::string pins;
+  for (const auto& w : where) pins += (pins.empty() ? "" : ", ") + w.key + "=" + w.value;
+  calibrate::MapRequest mr;
+  mr.out = out;
+  mr.title = a.title;
+  mr.pins = pins;
+  mr.overlay = overlay ? &*overlay : nullptr;
+  calibrate::draw_map(rs, s, mr);
+  std::cout << "wrote " << out << ": " << rs.label << " of job " << job << (pins.empty() ? "" : " (" + pins + ")")
+            << ", " << rs.with_data() << " point(s) with data, " << rs.holes() << " hole(s)"
+            << (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : std::string()) << "\n"
+            << "surrogate: " << s.describe(calibrate::metric_spec(rs.metric).unit) << "\n";
+  print_map_points(rs);
+  // What the surface stands on, as fit says it.
+  const std::string hint = jobs::query_hint(a.db, job);
+  for (const std::string& note : {rs.not_critical_note(hint), rs.warned_note(hint)})
+    if (!note.empty()) std::cout << "warning: " << note << "\n";
+  print_overlay_note(overlay, other_pins, job, pins);
+  return kOk;
+}
+
+}  // namespace
+
 void add_map(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("map", "Contour map of a metric over (theta, eta), PNG or SVG");
-  struct Args {
-    std::string db = "demcal.db", job, metric, out, title;
-    std::vector<std::string> where;
-    bool no_fit = false;
-  };
-  auto a = std::make_shared<Args>();
+  auto a = std::make_shared<MapArgs>();
   cmd->add_option("--metric", a->metric, "phi_peak, phi_cv, phi_diff, repose, or a stored metric")->required()->check(kNonEmpty);
   cmd->add_option("--job", a->job, "job to draw (default: the job storing the metric)")->check(kNonEmpty);
   cmd->add_option("--where", a->where, "KEY=VALUE pinning a parameter other than theta and eta; repeatable");
@@ -38,67 +116,7 @@ void add_map(CLI::App& app, int& exit_code) {
       ->check(kNonEmpty);
   cmd->add_flag("--no-fit", a->no_fit, "do not draw the latest fit's 95% region");
   cmd->callback([a, &exit_code] {
-    const auto body = [&] {
-      std::vector<jobs::Where> where;
-      for (const auto& w : a->where) where.push_back(jobs::parse_where(w));
-      const std::string out = a->out.empty() ? "map_" + a->metric + ".png" : a->out;
-      require_writable_file("--out", out);
-      require_db(a->db);
-      db::Store store(a->db, /*read_only=*/true);
-      const std::vector<std::string> jobs = a->job.empty() ? std::vector<std::string>{} : std::vector<std::string>{a->job};
-      const std::string job = calibrate::job_for_metric(store, a->metric, jobs, where, "--metric");
-      calibrate::GatherOptions go;
-      go.where = where;
-      const calibrate::ResponseSurface rs = calibrate::gather(store, job, a->metric, go);
-      calibrate::Surrogate s;
-      try {
-        s = calibrate::fit_surrogate(rs);
-      } catch (const std::invalid_argument& e) {
-        throw jobs::JobError("--job", "job \"" + job + "\", " + a->metric + ": " + e.what());
-      }
-      std::optional<calibrate::MapOverlay> overlay;
-      int other_pins = 0;
-      if (!a->no_fit) overlay = calibrate::latest_fit_overlay(store, job, a->metric, where, &other_pins);
-      std::string pins;
-      for (const auto& w : where) pins += (pins.empty() ? "" : ", ") + w.key + "=" + w.value;
-      calibrate::MapRequest mr;
-      mr.out = out;
-      mr.title = a->title;
-      mr.pins = pins;
-      mr.overlay = overlay ? &*overlay : nullptr;
-      calibrate::draw_map(rs, s, mr);
-      std::cout << "wrote " << out << ": " << rs.label << " of job " << job << (pins.empty() ? "" : " (" + pins + ")")
-                << ", " << rs.with_data() << " point(s) with data, " << rs.holes() << " hole(s)"
-                << (rs.partials() > 0 ? ", " + std::to_string(rs.partials()) + " short of replicas" : std::string()) << "\n"
-                << "surrogate: " << s.describe(calibrate::metric_spec(rs.metric).unit) << "\n";
-      for (const auto& p : rs.points)
-        if (p.hole() && !p.refine)
-          std::cout << "hole: theta = " << p.theta << ", eta = " << p.eta << " (" << p.without_value() << ")\n";
-      for (const auto& p : rs.points)
-        if (p.partial())
-          std::cout << "short of replicas: theta = " << p.theta << ", eta = " << p.eta << " (the mean of " << p.n()
-                    << "; " << p.without_value() << ")\n";
-      for (const auto& p : rs.points)
-        if (p.spiked > 0)
-          std::cout << "peak on a spike: theta = " << p.theta << ", eta = " << p.eta << " (" << p.spiked << " of "
-                    << p.n() << " replica(s))\n";
-      if (rs.on_spike > 0)
-        std::cout << "(phi_peak " << calibrate::spike_rule() << "; --metric phi_peak_smoothed_deg maps the running "
-                  << "mean's peak, " << calibrate::running_mean_vs_spike() << ")\n";
-      // What the surface stands on, as fit says it.
-      const std::string hint = jobs::query_hint(a->db, job);
-      for (const std::string& note : {rs.not_critical_note(hint), rs.warned_note(hint)})
-        if (!note.empty()) std::cout << "warning: " << note << "\n";
-      if (!overlay && other_pins > 0)
-        std::cout << "no fit drawn: job " << job << "'s " << other_pins << " fit(s) were made on other --where pins "
-                  << "than this map's (" << (pins.empty() ? std::string("none") : pins)
-                  << "); a fit is drawn on the map of the pins it was made on\n";
-      if (overlay)
-        std::cout << "drawn: 95% region and best point of fit " << overlay->fit_id
-                  << (overlay->targets.empty() ? std::string() : " (targets " + overlay->targets + ")") << "\n";
-      return kOk;
-    };
-    exit_code = guarded("", [&] { return chosen_job_errors(!a->job.empty(), body); });
+    exit_code = guarded("", [&] { return chosen_job_errors(!a->job.empty(), [&] { return run_map(*a); }); });
   });
 }
 
