@@ -141,7 +141,6 @@ struct VerletArrays {
 // for a loop that moves them one by one. Null for an empty array: its data() may be
 // null, and ->data() through a null pointer is undefined.
 double* flat(std::vector<Vec3>& v) { return v.empty() ? nullptr : v.data()->data(); }
-const double* flat(const std::vector<Vec3>& v) { return v.empty() ? nullptr : v.data()->data(); }
 
 // Scatters a finished batch: forces and torques onto the grains, history back into
 // the list, the largest overlap into the thread's accumulator. A frictionless batch
