@@ -256,11 +256,10 @@ TimestepPoint timestep_point(bool friction, double factor, const std::vector<Res
   return p;
 }
 
-TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
-  TimestepStudy s;
-  s.tolerance = o.tolerance > 0 ? o.tolerance : kDefaultTolerance;
-  const Job job = parse_job(timestep_job(o.quick).dump(2), "study timestep");
-  s.job = job.name;
+namespace {
+
+// Runs (or resumes) the study's job; the study needs every task finished.
+void run_study_tasks(db::Store& store, const Job& job, const StudyOptions& o, TimestepStudy& s) {
   fs::create_directories(o.out_dir);
   RunOptions ro;
   ro.workers = o.workers;
@@ -274,8 +273,11 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   s.tasks = sum.total;
   s.reused = sum.reused;
   s.ran = sum.ran;
+}
 
-  critical_factors(s);
+// One point per (friction, factor), its replicas pooled; frictionless first, each
+// series by factor.
+void collect_points(db::Store& store, const Job& job, TimestepStudy& s) {
   std::map<std::pair<bool, double>, std::vector<ResultRow>> groups;  // (friction, factor) -> replicas
   for (ResultRow& r : select_rows(store, job.name, {}))
     groups[{r.params.at("keep_friction").get<bool>(), r.params.at("dt_factor").get<double>()}].push_back(std::move(r));
@@ -284,69 +286,89 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
     return a.friction != b.friction ? !a.friction : a.dt_factor < b.dt_factor;
   });
   mark_pareto(s.points);
+}
 
-  // Largest factor k such that at every factor up to k the frictionless drift is
-  // within tolerance and the run with friction and rolling neither went unstable nor
-  // gained more than the tolerance. Every smaller factor must pass too: one run per
-  // factor is noisy, and a lucky pass beyond a failure is no recommendation. Nor past
-  // the full law's critical step: the dilute gas's brief contacts may survive it, but
-  // the engine refuses it for a job, and a dense pack would not.
-  // The runs with friction and rolling at a frictionless point's factor (null: none).
-  const auto friction_run = [&](const TimestepPoint& p) -> const TimestepPoint* {
-    const auto it = std::find_if(s.points.begin(), s.points.end(),
-                                 [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
-    return it == s.points.end() ? nullptr : &*it;
-  };
+// The run with friction and rolling at a frictionless point's factor (null: none).
+const TimestepPoint* friction_run(const TimestepStudy& s, const TimestepPoint& p) {
+  const auto it = std::find_if(s.points.begin(), s.points.end(),
+                               [&](const TimestepPoint& q) { return q.friction && q.dt_factor == p.dt_factor; });
+  return it == s.points.end() ? nullptr : &*it;
+}
+
+// Largest factor k such that at every factor up to k the frictionless drift is
+// within tolerance and the run with friction and rolling neither went unstable nor
+// gained more than the tolerance. Every smaller factor must pass too: one run per
+// factor is noisy, and a lucky pass beyond a failure is no recommendation. Nor past
+// the full law's critical step: the dilute gas's brief contacts may survive it, but
+// the engine refuses it for a job, and a dense pack would not.
+void recommend_factor(TimestepStudy& s) {
   for (const auto& p : s.points) {
     if (p.friction) continue;
     if (p.dt_factor > s.critical_factor_full) {
       s.capped_at_critical = s.recommended_factor > 0 && p.ok && std::abs(p.drift) <= s.tolerance;
       break;
     }
-    const TimestepPoint* fr = friction_run(p);
+    const TimestepPoint* fr = friction_run(s, p);
     const bool pass = p.ok && std::abs(p.drift) <= s.tolerance && fr && fr->ok && fr->drift <= s.tolerance;
     if (!pass) break;  // points are sorted by factor within the series
     s.recommended_factor = p.dt_factor;
   }
+}
+
+// Why the smallest factor failed: every factor up to a recommendation must pass.
+std::string why_none_passed(const TimestepStudy& s) {
+  const auto p = std::find_if(s.points.begin(), s.points.end(), [](const TimestepPoint& q) { return !q.friction; });
+  if (p == s.points.end()) return "no run finished";
+  const TimestepPoint* fr = friction_run(s, *p);
+  std::string why;
+  if (!p->ok)
+    why = "the frictionless runs went unstable";
+  else if (std::abs(p->drift) > s.tolerance)
+    why = "the frictionless runs drifted by " + fmt(p->drift, 3) + " per simulated second";
+  else if (!fr || !fr->ok)
+    why = "the runs with friction and rolling went unstable";
+  else
+    why = "the runs with friction and rolling gained " + fmt(fr->drift, 3) + " per simulated second";
+  return "already at the smallest factor, " + fmt(p->dt_factor) + ", " + why;
+}
+
+std::string recommendation_text(const TimestepStudy& s) {
   std::ostringstream rec;
-  if (s.recommended_factor > 0) {
-    const double base = std::sqrt(2650.0 * engine::sphere_volume(0.5e-3) / 3e7);
-    rec << "recommended dt_factor " << s.recommended_factor << " (dt = " << fmt(s.recommended_factor * base)
-        << " s for d_min = 1 mm, Kn = 3e7 N/m): the largest factor whose energy drift stays within "
-        << fmt(s.tolerance) << " per simulated second frictionless in every replica, at it and at every smaller factor, and "
-        << "whose run with friction and rolling stays stable and gains no energy beyond it; the engine's critical factors are " << fmt(s.critical_factor_frictionless)
-        << " (frictionless, normal mode) and " << fmt(s.critical_factor_full) << " (" << s.critical_mode_full
-        << ")";
-    if (s.capped_at_critical)
-      rec << "; the next factor's frictionless runs drifted within the tolerance too, but it lies past the critical "
-             "step of the full law, which the engine refuses for a job";
-  } else {
-    // Why the smallest factor failed: every factor up to a recommendation must pass.
-    std::string why = "no run finished";
-    const auto p = std::find_if(s.points.begin(), s.points.end(), [](const TimestepPoint& q) { return !q.friction; });
-    if (p != s.points.end()) {
-      const TimestepPoint* fr = friction_run(*p);
-      if (!p->ok)
-        why = "the frictionless runs went unstable";
-      else if (std::abs(p->drift) > s.tolerance)
-        why = "the frictionless runs drifted by " + fmt(p->drift, 3) + " per simulated second";
-      else if (!fr || !fr->ok)
-        why = "the runs with friction and rolling went unstable";
-      else
-        why = "the runs with friction and rolling gained " + fmt(fr->drift, 3) + " per simulated second";
-      why = "already at the smallest factor, " + fmt(p->dt_factor) + ", " + why;
-    }
-    rec << "no dt_factor passed at tolerance " << fmt(s.tolerance) << " per simulated second: " << why
+  if (s.recommended_factor <= 0) {
+    rec << "no dt_factor passed at tolerance " << fmt(s.tolerance) << " per simulated second: " << why_none_passed(s)
         << " (a factor is recommended only if it and every smaller one pass)";
+    return rec.str();
   }
-  s.recommendation = rec.str();
+  const double base = std::sqrt(2650.0 * engine::sphere_volume(0.5e-3) / 3e7);
+  rec << "recommended dt_factor " << s.recommended_factor << " (dt = " << fmt(s.recommended_factor * base)
+      << " s for d_min = 1 mm, Kn = 3e7 N/m): the largest factor whose energy drift stays within "
+      << fmt(s.tolerance) << " per simulated second frictionless in every replica, at it and at every smaller factor, and "
+      << "whose run with friction and rolling stays stable and gains no energy beyond it; the engine's critical factors are " << fmt(s.critical_factor_frictionless)
+      << " (frictionless, normal mode) and " << fmt(s.critical_factor_full) << " (" << s.critical_mode_full
+      << ")";
+  if (s.capped_at_critical)
+    rec << "; the next factor's frictionless runs drifted within the tolerance too, but it lies past the critical "
+           "step of the full law, which the engine refuses for a job";
+  return rec.str();
+}
+
+}  // namespace
+
+TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
+  TimestepStudy s;
+  s.tolerance = o.tolerance > 0 ? o.tolerance : kDefaultTolerance;
+  const Job job = parse_job(timestep_job(o.quick).dump(2), "study timestep");
+  s.job = job.name;
+  run_study_tasks(store, job, o, s);
+  critical_factors(s);
+  collect_points(store, job, s);
+  recommend_factor(s);
+  s.recommendation = recommendation_text(s);
   write_timestep_charts(s, o.out_dir);
-  {
-    WholeTextFile r((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
-    r << s.recommendation << "\n";
-    r.commit();
-    s.files.push_back((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
-  }
+  WholeTextFile r((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
+  r << s.recommendation << "\n";
+  r.commit();
+  s.files.push_back((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
   return s;
 }
 
