@@ -1061,6 +1061,8 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
   angles_from_series(cfg, res);
   volume_change_from_series(cfg, res);
   judge_window(cfg, res);
+  // Before the verdict: an invalid run's interior of a few grains is not measured either.
+  judge_the_interior(cfg, res);
   if (const std::string why = why_invalid(cfg, res); !why.empty()) {
     res.outcome.status = SceneStatus::invalid;
     res.outcome.failed_stage = "shear";
@@ -1068,7 +1070,6 @@ TriaxialResult run_triaxial(const TriaxialConfig& cfg, Observer* obs) {
     finish();
     return res;
   }
-  judge_the_interior(cfg, res);
   warn_about_the_regime(cfg, res);
   res.outcome.join_warnings();
   finish();
