@@ -365,10 +365,11 @@ TimestepStudy run_timestep_study(db::Store& store, const StudyOptions& o) {
   recommend_factor(s);
   s.recommendation = recommendation_text(s);
   write_timestep_charts(s, o.out_dir);
-  WholeTextFile r((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
+  const std::string text = (fs::path(o.out_dir) / "timestep_recommendation.txt").string();
+  WholeTextFile r(text);
   r << s.recommendation << "\n";
   r.commit();
-  s.files.push_back((fs::path(o.out_dir) / "timestep_recommendation.txt").string());
+  s.files.push_back(text);
   return s;
 }
 
