@@ -73,6 +73,26 @@ double TriaxialConfig::shear_steps() const {
   return std::ceil((axial_strain + shear_ramp_strain) / (strain_rate * step_forecast().dt));
 }
 
+double TriaxialConfig::prep_wall_impact_depth() const {
+  const Grading g = material.grading();
+  const double solid = static_cast<double>(particles) * M_PI / 6.0 * g.mean_cube();
+  const double side = std::cbrt(solid / (initial_solid_fraction * aspect_ratio));
+  const double speed = 0.5 * prep_strain_rate * side;
+  const double m_max = grain_density() * M_PI / 6.0 * g.d_max * g.d_max * g.d_max;
+  return speed * std::sqrt(m_max / material.kn) / (0.5 * g.d_max);
+}
+
+std::string TriaxialConfig::prep_wall_impact_words() const {
+  const double depth = prep_wall_impact_depth();
+  return "the preparation's walls close in fast enough (triaxial.prep_strain_rate " + fmt(prep_strain_rate) +
+         " /s) to press the largest grain " + fmt(100.0 * depth, 2) +
+         "% of its radius into a wall before its contact pushes back (speed x sqrt(m / kn); the overlap limit is " +
+         fmt(100.0 * max_overlap_fraction, 2) + "%): a triaxial.prep_strain_rate of about " +
+         fmt(prep_strain_rate_for_impact(kWallImpactSuggested), 2) + " /s keeps that to " +
+         fmt(100.0 * kWallImpactSuggested * max_overlap_fraction, 2) +
+         "% (500 grains of kn = 1.1e4 N/m blew up at 7.4% and held at 3.7%)";
+}
+
 namespace {
 // The inertial number of a shear at `rate` on grains of mean diameter d and density
 // rho under mean stress p (GDR MiDi 2004): quasi-static well below 1e-3.
@@ -966,8 +986,10 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
        ", where kn / (p d_min) = " + fmt(kappa, 3);
   if (kappa < TriaxialConfig::kLowStiffnessNumber)
     s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "
-         "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
-         "confining_kpa, or raise material.kn";
+         "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); " +
+         std::string(TriaxialConfig::kLowStiffnessRemedy(at_prep_load));
+  if (rig.stage != "shear" && cfg.prep_wall_impact_depth() > TriaxialConfig::kWallImpactNoted * cfg.max_overlap_fraction)
+    s += "; " + cfg.prep_wall_impact_words();
   // In shear the walls drive the grains: far past the quasi-static limit they ram
   // them into each other faster than the contacts push back (5 /s on 400 grains:
   // an overlap of 0.29 of a radius after 26,000 steps, the shear being 10 steps).

@@ -267,8 +267,8 @@ void advise_rates_and_step(const engine::TriaxialConfig& c, const engine::StepFo
        << p_max << " Pa, the preparation's highest mean stress"
        << (c.packing == engine::Packing::dense ? " (triaxial.prep_pressure_factor x p0)" : "")
        << ": grains will press deep into each other, and the run may stop on an overlap past the limit whatever "
-          "the step (the seed's material: 3000 in its dense preparation); lower triaxial.prep_pressure_factor or "
-          "confining_kpa, or raise material.kn";
+          "the step (the seed's material: 3000 in its dense preparation); "
+       << engine::TriaxialConfig::kLowStiffnessRemedy(c.packing == engine::Packing::dense && c.prep_pressure_factor > 1.0);
   // The critical step is an isolated pair's; a packed grain's several contacts lower
   // the limit, and the dense preparation's frictionless stages step at the same
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
@@ -311,6 +311,10 @@ void advise_stage_lengths(const engine::TriaxialConfig& c, const engine::StepFor
        << c.prep_strain_rate << " /s and a step of " << step << " s, need about " << steps_to_close
        << " steps to pack the sample, more than triaxial.prep_step_budget (" << c.prep_step_budget
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget";
+  // Soft grains (a low kn) take long steps, and walls closing at the rate that suits
+  // the seed's stiffness ram them into each other before their contacts push back.
+  if (c.prep_wall_impact_depth() > engine::TriaxialConfig::kWallImpactNoted * c.max_overlap_fraction)
+    next_note(os, 3) << c.prep_wall_impact_words();
 }
 
 // Frictionless grains, and settings the task does not use (its key changes, its work

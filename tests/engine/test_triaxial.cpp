@@ -786,6 +786,37 @@ TEST(TriaxialScene, QuasiStaticWarningAboveTheInertialLimit) {
   EXPECT_TRUE(warned);
 }
 
+// Grains 2,700 times softer than the seed's take 52 times longer steps, and the
+// preparation's walls, at the rate that suits the seed's stiffness, ram them into each
+// other in a few dozen steps. The blow-up names the rate and the one that holds, and
+// that rate prepares the same sample.
+TEST(TriaxialScene, PreparationWallsTooFastForSoftGrainsAreNamed) {
+  TriaxialConfig seed_like = small(Packing::dense);
+  seed_like.particles = 2000;
+  EXPECT_NEAR(seed_like.prep_wall_impact_depth(), 0.0045, 0.0003);  // the seed's material
+  TriaxialConfig c = small(Packing::dense);
+  c.particles = 300;
+  c.material.kn = 1.1e4;
+  c.material.ks = 9900;
+  c.prep_pressure_factor = 1.0;
+  c.axial_strain = 0.01;
+  c.cv_from = 0.005;
+  c.cv_to = 0.01;
+  const double depth = c.prep_wall_impact_depth();
+  EXPECT_GT(depth, TriaxialConfig::kWallImpactNoted * c.max_overlap_fraction);
+  const TriaxialResult fast = run_triaxial(c);
+  EXPECT_EQ(fast.outcome.status, SceneStatus::unstable) << fast.outcome.message;
+  EXPECT_EQ(fast.outcome.failed_stage, "isotropic_compression");
+  EXPECT_NE(fast.outcome.message.find("the preparation's walls close in fast enough (triaxial.prep_strain_rate 0.02 /s)"),
+            std::string::npos)
+      << fast.outcome.message;
+  EXPECT_EQ(fast.outcome.message.find("prep_pressure_factor"), std::string::npos) << fast.outcome.message;
+  c.prep_strain_rate = c.prep_strain_rate_for_impact(TriaxialConfig::kWallImpactSuggested);
+  EXPECT_NEAR(c.prep_wall_impact_depth(), TriaxialConfig::kWallImpactSuggested * c.max_overlap_fraction, 1e-12);
+  const TriaxialResult slow = run_triaxial(c);
+  EXPECT_TRUE(slow.outcome.ok()) << slow.outcome.failed_stage << ": " << slow.outcome.message;
+}
+
 TEST(TriaxialScene, ExhaustedStepBudgetFailsTheStageWithoutMetrics) {
   TriaxialConfig c = small(Packing::dense);
   c.particles = 200;

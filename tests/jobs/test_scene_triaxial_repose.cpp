@@ -492,13 +492,28 @@ TEST(TriaxialReposeScenes, APreparationTheSettingsDoomAreNotedBeforeTheRun) {
   const json base = triaxial_base();
   const std::string plain = notes_of(base);
   for (const char* what :
-       {"kn / (p d_min)", "the preparation's walls", "of the critical step of an isolated pair", "the shear is only"})
+       {"kn / (p d_min)", "the preparation's walls", "of the critical step of an isolated pair", "the shear is only",
+        "close in fast enough"})
     EXPECT_EQ(plain.find(what), std::string::npos) << plain;
   json j = base;
   j["triaxial"]["confining_kpa"] = 10000;  // a dense preparation at 1 GPa: kn / (p d_min) = 30
   EXPECT_NE(notes_of(j).find("kn / (p d_min) is 30 at 1e+09 Pa, the preparation's highest mean stress"),
             std::string::npos)
       << notes_of(j);
+  // Grains 2,700 times softer than the seed's at its preparation rate: the walls ram
+  // them (the run blows up in isotropic_compression); the note names the rate that does not.
+  j = base;
+  j["material"]["kn"] = 1.1e4;
+  j["material"]["ks"] = 9900;
+  j["triaxial"]["prep_pressure_factor"] = 1;
+  EXPECT_NE(notes_of(j).find("close in fast enough (triaxial.prep_strain_rate 0.02 /s) to press the largest grain 14% "
+                            "of its radius into a wall"),
+            std::string::npos)
+      << notes_of(j);
+  EXPECT_NE(notes_of(j).find("lower triaxial.confining_kpa or raise material.kn"), std::string::npos) << notes_of(j);
+  EXPECT_EQ(notes_of(j).find("lower triaxial.prep_pressure_factor"), std::string::npos) << notes_of(j);
+  j["triaxial"]["prep_strain_rate"] = 0.0013;
+  EXPECT_EQ(notes_of(j).find("close in fast enough"), std::string::npos) << notes_of(j);
   j = base;
   j["material"]["diameter"] = {{"min", 1e-5}, {"max", 2e-5}};  // a 1000x finer step
   EXPECT_NE(notes_of(j).find("need about"), std::string::npos) << notes_of(j);
