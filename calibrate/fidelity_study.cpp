@@ -4,12 +4,14 @@
 #include "db/store.hpp"
 #include "study.hpp"
 #include "study_support.hpp"
+#include "engine/scenes/triaxial.hpp"
 
 #include <algorithm>
 #include <map>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <set>
 #include <sstream>
@@ -25,6 +27,10 @@ struct KnobDef {
   std::string what;                   // axis words
   std::vector<nlohmann::json> values; // settings (the baseline's value among them)
   double reference = 0;               // the most expensive setting
+  std::string section = "";           // the job section of params: the scene's when empty
+  // Further settings that follow the knob's value, written into each setting's job
+  // (one job a setting then: a grid would cross them).
+  std::function<void(nlohmann::json& job, double value)> follow = nullptr;
 };
 
 struct FidelityDef {
@@ -37,6 +43,39 @@ struct FidelityDef {
 nlohmann::json seed_material() {
   return {{"kn", 3e7}, {"ks", 2.7e7}, {"density", 2650.0}, {"b", 1.0}, {"theta_deg", 30.0}, {"eta", 0.1},
           {"diameter", {{"min", 1e-3}, {"max", 2e-3}}}};
+}
+
+bool same_value(double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b)); }
+
+double three_digits(double v) { return std::stod(fmt(v, 3)); }
+
+// A triaxial job's grains made softer or stiffer than its material's: kn set, and
+// what must follow it so that the preparation does what it does at the material's
+// stiffness. ks keeps its ratio to kn. The preparation's walls move sqrt(kn / kn0) as
+// fast, which presses a grain as deep into a wall on impact (speed x sqrt(m / kn);
+// at the seed's rate 500 grains of kn = 1.1e4 N/m blow up within 100 steps) and takes
+// as many steps. The dense preparation's extra load comes down so that kn / (p d_min)
+// stays at least 3,000 there, as for the seed's material at 100 p0.
+void follow_stiffness(nlohmann::json& j, double kn) {
+  const nlohmann::json& m = j.at("material");
+  const double kn0 = m.at("kn").get<double>();
+  if (same_value(kn, kn0)) return;
+  const engine::TriaxialConfig defaults;
+  nlohmann::json& t = j.at("triaxial");
+  j["material"]["ks"] = three_digits(m.at("ks").get<double>() * kn / kn0);
+  const double rate = t.value("prep_strain_rate", defaults.prep_strain_rate);
+  t["prep_strain_rate"] = three_digits(rate * std::sqrt(kn / kn0));
+  const double kappa = kn / (t.at("confining_kpa").get<double>() * 1e3 * m.at("diameter").at("min").get<double>());
+  t["prep_pressure_factor"] = three_digits(std::clamp(kappa / 3000.0, 1.0, defaults.prep_pressure_factor));
+}
+
+// The grains' stiffness, the seed's kn the most expensive setting (the step grows as
+// 1 / sqrt(kn)).
+KnobDef stiffness_knob(std::vector<nlohmann::json> kns) {
+  KnobDef k{"stiffness", {"kn"}, {"kn"}, "normal stiffness kn [N/m] (ks and the preparation follow)", std::move(kns), 3e7};
+  k.section = "material";
+  k.follow = follow_stiffness;
+  return k;
 }
 
 FidelityDef fidelity_def(const std::string& name, bool quick, bool smoothed_peak) {
@@ -58,7 +97,8 @@ FidelityDef fidelity_def(const std::string& name, bool quick, bool smoothed_peak
                  {"rate", {"strain_rate"}, {"strain_rate"}, "axial strain rate [1/s]", {1e-4, 3e-4, 1e-3}, 1e-4},
                  {"dt", {"dt_factor"}, {"dt_factor"}, "dt factor", {0.15, 0.3, 0.45}, 0.15},
                  {"density", {"scaled_density", "density_scale"}, {"scaled_density"}, "scaled grain density [kg/m^3]",
-                  {2.65e11, 2.65e12, 2.65e13}, 2.65e11}};
+                  {2.65e11, 2.65e12, 2.65e13}, 2.65e11},
+                 stiffness_knob({3e4, 3e5, 3e6, 3e7})};
     } else {
       // A smoke-sized version: 150-300 grains to 10% axial strain at 1e-2 /s
       // (inertial, not quasi-static: its figures check the machinery, not the physics).
@@ -70,7 +110,8 @@ FidelityDef fidelity_def(const std::string& name, bool quick, bool smoothed_peak
                  // once, so the quick study always shows how failures are charted and listed.
                  {"dt", {"dt_factor"}, {"dt_factor"}, "dt factor", {0.15, 0.3, 2.0}, 0.15},
                  {"density", {"scaled_density", "density_scale"}, {"scaled_density"}, "scaled grain density [kg/m^3]",
-                  {2.65e12, 2.65e13}, 2.65e12}};
+                  {2.65e12, 2.65e13}, 2.65e12},
+                 stiffness_knob({3e6, 3e7})};
     }
   } else {
     d.scene = "repose";
@@ -115,8 +156,6 @@ std::string knob_list(const FidelityDef& d) {
   for (const auto& k : d.knobs) all += (all.empty() ? "" : ", ") + k.name;
   return all;
 }
-
-bool same_value(double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b)); }
 
 std::string label_of(double v) { return fmt(v, 4); }
 
@@ -170,6 +209,10 @@ std::vector<KnobDef> selected_knobs(const FidelityDef& d, const StudyOptions& o)
   return out;
 }
 
+double baseline_value(const FidelityDef& d, const KnobDef& k) {
+  return (k.section == "material" ? d.material : d.base).at(k.params.front()).get<double>();
+}
+
 int effective_replicas(const StudyOptions& o) { return o.replicas > 0 ? o.replicas : (o.quick ? 1 : 3); }
 
 std::string job_prefix(const FidelityDef& d, bool quick) { return "study-" + d.name + (quick ? "-quick" : ""); }
@@ -192,15 +235,20 @@ nlohmann::json base_job(const FidelityDef& d, const std::string& name, int repli
 std::vector<nlohmann::json> knob_jobs(const FidelityDef& d, const KnobDef& k, bool quick, int replicas) {
   std::vector<nlohmann::json> jobs;
   const std::string prefix = job_prefix(d, quick) + "-" + k.name;
-  if (k.params.size() == 1) {
+  const std::string section = k.section.empty() ? d.scene : k.section;
+  if (k.params.size() == 1 && !k.follow) {
     nlohmann::json j = base_job(d, prefix, replicas, k.what);
-    j[d.scene].erase(k.params.front());
+    j[section].erase(k.params.front());
     j["grid"] = {{k.params.front(), k.values}};
     jobs.push_back(j);
   } else {
     for (const auto& v : k.values) {
-      nlohmann::json j = base_job(d, prefix + "-" + label_of(v.get<double>()), replicas, k.what + " = " + label_of(v.get<double>()));
-      for (const auto& p : k.params) j[d.scene][p] = v;
+      const std::string label = label_of(v.get<double>());
+      std::string in_name = label;  // a job name holds no '+' (3e+04)
+      in_name.erase(std::remove(in_name.begin(), in_name.end(), '+'), in_name.end());
+      nlohmann::json j = base_job(d, prefix + "-" + in_name, replicas, k.what + " = " + label);
+      if (k.follow) k.follow(j, v.get<double>());
+      for (const auto& p : k.params) j[section][p] = v;
       jobs.push_back(j);
     }
   }
@@ -463,7 +511,7 @@ FidelityPoint measure_setting(const FidelityDef& d, const KnobDef& kd, const std
   FidelityPoint p;
   p.value = value;
   p.label = label_of(p.value);
-  p.baseline = same_value(p.value, d.base.at(kd.params.front()).get<double>());
+  p.baseline = same_value(p.value, baseline_value(d, kd));
   p.reference = same_value(p.value, kd.reference);
   std::vector<std::vector<double>> vals(nm);
   std::vector<double> ok_wall, failed_wall, ok_work;
@@ -659,7 +707,7 @@ FidelityStudy run_fidelity_study(db::Store& store, const std::string& name, cons
   s.tolerance = o.tolerance > 0 ? o.tolerance : 2.0;
   s.replicas = effective_replicas(o);
   for (const auto& k : d.knobs) {
-    s.baseline += (s.baseline.empty() ? "" : ", ") + k.name + " " + label_of(d.base.at(k.params.front()).get<double>());
+    s.baseline += (s.baseline.empty() ? "" : ", ") + k.name + " " + label_of(baseline_value(d, k));
   }
   const std::vector<std::vector<Job>> jobs = knob_job_sets(d, knobs, o, name, s.replicas);
   run_knob_jobs(store, jobs, o, s);

@@ -248,7 +248,7 @@ void add_study(CLI::App& app, int& exit_code) {
   cmd->add_option("--replicas", a->replicas, "fidelity studies: packings (seeds 1..R) per setting (default 3, --quick 1)")
       ->transform(kWholeNumber)->check(CLI::Range(1, 1000));
   cmd->add_option("--knobs", a->knobs,
-                  "fidelity studies: knobs to vary, comma-separated (fidelity: particles, rate, dt, density; "
+                  "fidelity studies: knobs to vary, comma-separated (fidelity: particles, rate, dt, density, stiffness; "
                   "repose-fidelity: depth, column, stiffness, dt; default all)")
       ->delimiter(',');
   cmd->add_option("--reference", a->references,

@@ -5,6 +5,7 @@
 #include "cli_util.hpp"
 
 #include <cmath>
+#include <map>
 #include <fcntl.h>
 #include <sqlite3.h>
 #include <sstream>
@@ -323,16 +324,63 @@ TEST(CliStudy, FidelityQuickChartsRecommendsListsFailuresAndReuses) {
   EXPECT_NEAR(raw_ref - smoothed_ref, 2.5, 1e-3) << raw_ref << " " << smoothed_ref;
 }
 
+// Softer grains take longer steps: the knob sets kn, and ks, the preparation's wall
+// speed and the dense preparation's load follow it (without them a soft sample's
+// preparation blows up); the seed's stiffness is the baseline, its job the other
+// knobs' baseline job.
+TEST(CliStudy, FidelityStiffnessKnobSoftensTheGrainsAndWhatMustFollow) {
+  TempDir d;
+  const std::vector<std::string> args = {"study", "fidelity", "--quick", "--knobs", "stiffness", "--workers", "2",
+                                         "--db", "s.db", "--out", "f"};
+  const Result r = run_demcal(args, d.path.string());
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  EXPECT_NE(r.out.find("2 tasks in s.db (0 reused, 2 run now)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("stiffness (kn):"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("stiffness 3e+07; 1 replica(s)"), std::string::npos) << r.out;
+  const nlohmann::json soft = nlohmann::json::parse(slurp(d.file("f/jobs/study-fidelity-quick-stiffness-3e06.json")));
+  EXPECT_EQ(soft["material"]["kn"].get<double>(), 3e6);
+  EXPECT_EQ(soft["material"]["ks"].get<double>(), 2.7e6);
+  EXPECT_EQ(soft["triaxial"]["prep_strain_rate"].get<double>(), 0.00632);  // 0.02 sqrt(1/10)
+  EXPECT_EQ(soft["triaxial"]["prep_pressure_factor"].get<double>(), 10.0);  // kn/(100 p0 d_min) = 3000 kept
+  const nlohmann::json seed = nlohmann::json::parse(slurp(d.file("f/jobs/study-fidelity-quick-stiffness-3e07.json")));
+  EXPECT_FALSE(seed["triaxial"].contains("prep_strain_rate"));
+  EXPECT_FALSE(seed["triaxial"].contains("prep_pressure_factor"));
+  // The soft task's step is sqrt(10) times longer, and its shear that many times shorter.
+  const Result q = run_demcal({"query", "--db", "s.db", "--metrics", "dt,shear.steps", "--format", "csv"}, d.path.string());
+  ASSERT_EQ(q.rc, 0) << q.err;
+  std::istringstream in(q.out);
+  std::string line, cell;
+  std::getline(in, line);
+  std::vector<std::string> head;
+  for (std::istringstream h(line); std::getline(h, cell, ',');) head.push_back(cell);
+  std::map<double, std::pair<double, double>> by_kn;  // kn: dt, shear steps
+  while (std::getline(in, line)) {
+    std::map<std::string, std::string> row;
+    std::istringstream cells(line);
+    for (std::size_t i = 0; i < head.size() && std::getline(cells, cell, ','); ++i) row[head[i]] = cell;
+    by_kn[std::stod(row["kn"])] = {std::stod(row["dt"]), std::stod(row["shear.steps"])};
+  }
+  ASSERT_EQ(by_kn.size(), 2u) << q.out;
+  EXPECT_NEAR(by_kn[3e6].first / by_kn[3e7].first, std::sqrt(10.0), 1e-6);
+  EXPECT_NEAR(by_kn[3e7].second / by_kn[3e6].second, std::sqrt(10.0), 0.01);
+  // kn names the knob too; the reference may be set by it; a rerun reuses both tasks.
+  std::vector<std::string> by_name = args;
+  by_name[4] = "kn";
+  const Result again = run_demcal(by_name, d.path.string());
+  ASSERT_EQ(again.rc, 0) << again.err;
+  EXPECT_NE(again.out.find("2 tasks in s.db (2 reused, 0 run now)"), std::string::npos) << again.out;
+}
+
 // Every knob's table holds the baseline's tasks: the warnings are counted per task,
-// once, as the task count is (6 tasks, 2 of them failing by design).
+// once, as the task count is (7 tasks, 2 of them failing by design).
 TEST(CliStudy, FidelityCountsEachWarnedTaskOnce) {
   TempDir d;
   const Result r = run_demcal({"study", "fidelity", "--quick", "--workers", "2", "--db", "s.db", "--out", "f"},
                               d.path.string());
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  EXPECT_NE(r.out.find("6 tasks in s.db"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("7 tasks in s.db"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("failed tasks (2)"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("warnings: 4 of the 4 finished tasks carry warnings"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("warnings: 5 of the 5 finished tasks carry warnings"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("--job JOB lists them, JOB one of study-fidelity-quick-density, study-fidelity-quick-dt"),
             std::string::npos)
       << r.out;
