@@ -66,7 +66,8 @@ void follow_stiffness(nlohmann::json& j, double kn) {
   const double rate = t.value("prep_strain_rate", defaults.prep_strain_rate);
   t["prep_strain_rate"] = three_digits(rate * std::sqrt(kn / kn0));
   const double kappa = kn / (t.at("confining_kpa").get<double>() * 1e3 * m.at("diameter").at("min").get<double>());
-  t["prep_pressure_factor"] = three_digits(std::clamp(kappa / 3000.0, 1.0, defaults.prep_pressure_factor));
+  const double factor = t.value("prep_pressure_factor", defaults.prep_pressure_factor);
+  t["prep_pressure_factor"] = three_digits(std::clamp(kappa / 3000.0, 1.0, std::max(factor, 1.0)));
 }
 
 // The grains' stiffness, the seed's kn the most expensive setting (the step grows as

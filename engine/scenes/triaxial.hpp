@@ -145,7 +145,7 @@ struct TriaxialConfig {
   // (prep_strain_rate * L0 / 2, L0 the initial box's side), press the largest grain
   // into a wall before its contact pushes back: v sqrt(m / kn), as a fraction of its
   // radius. The seed's material on 2,000 grains: 0.45%. 500 grains 2,700 times softer
-  // blew up at 7.4% and 15% (three packings each) and held at 3.7% and less.
+  // blew up at 7.4% (three packings) and 15% (four tasks) and held at 3.7% and less.
   double prep_wall_impact_depth() const;
   // The prep_strain_rate at which that depth is `fraction` of max_overlap_fraction.
   double prep_strain_rate_for_impact(double fraction) const {
@@ -167,7 +167,7 @@ struct TriaxialConfig {
   static constexpr double kLowStiffnessNumber = 1000.0;
   // What to change when kn / (p d_min) is below that: the dense preparation's extra
   // load first, where it has one.
-  static const char* kLowStiffnessRemedy(bool prep_load_raised) {
+  static const char* low_stiffness_remedy(bool prep_load_raised) {
     return prep_load_raised ? "lower triaxial.prep_pressure_factor or confining_kpa, or raise material.kn"
                             : "lower triaxial.confining_kpa or raise material.kn";
   }

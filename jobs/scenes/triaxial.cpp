@@ -268,7 +268,7 @@ void advise_rates_and_step(const engine::TriaxialConfig& c, const engine::StepFo
        << (c.packing == engine::Packing::dense ? " (triaxial.prep_pressure_factor x p0)" : "")
        << ": grains will press deep into each other, and the run may stop on an overlap past the limit whatever "
           "the step (the seed's material: 3000 in its dense preparation); "
-       << engine::TriaxialConfig::kLowStiffnessRemedy(c.packing == engine::Packing::dense && c.prep_pressure_factor > 1.0);
+       << engine::TriaxialConfig::low_stiffness_remedy(c.packing == engine::Packing::dense && c.prep_pressure_factor > 1.0);
   // The critical step is an isolated pair's; a packed grain's several contacts lower
   // the limit, and the dense preparation's frictionless stages step at the same
   // margin to theirs: 200 grains at 0.97 and 0.995 of it blew up in preparation, at
