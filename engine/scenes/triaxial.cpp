@@ -988,7 +988,7 @@ std::string instability_context(const Rig& rig, const InstabilityError& e, const
     s += ": a stiffness this low against the load presses grains deep into each other whatever the step (the "
          "seed's material: 3e5 at 100 kPa, 3000 in its dense preparation); " +
          std::string(TriaxialConfig::low_stiffness_remedy(at_prep_load));
-  if (rig.stage != "shear" && cfg.prep_wall_impact_depth() > TriaxialConfig::kWallImpactNoted * cfg.max_overlap_fraction)
+  if (rig.stage != "shear" && cfg.prep_walls_too_fast())
     s += "; " + cfg.prep_wall_impact_words();
   // In shear the walls drive the grains: far past the quasi-static limit they ram
   // them into each other faster than the contacts push back (5 /s on 400 grains:

@@ -151,6 +151,9 @@ struct TriaxialConfig {
   double prep_strain_rate_for_impact(double fraction) const {
     return prep_strain_rate * fraction * max_overlap_fraction / prep_wall_impact_depth();
   }
+  // Whether that depth is past kWallImpactNoted of the overlap limit (noted by validate,
+  // said on a preparation's blow-up).
+  bool prep_walls_too_fast() const { return prep_wall_impact_depth() > kWallImpactNoted * max_overlap_fraction; }
   // That depth said in words, with the rate that brings it to kWallImpactSuggested.
   std::string prep_wall_impact_words() const;
   static constexpr double kWallImpactNoted = 0.1;      // of max_overlap_fraction: said before the run and on a blow-up

@@ -313,7 +313,7 @@ void advise_stage_lengths(const engine::TriaxialConfig& c, const engine::StepFor
        << "): the run will stop in isotropic_compression; raise prep_strain_rate or prep_step_budget";
   // Soft grains (a low kn) take long steps, and walls closing at the rate that suits
   // the seed's stiffness ram them into each other before their contacts push back.
-  if (c.prep_wall_impact_depth() > engine::TriaxialConfig::kWallImpactNoted * c.max_overlap_fraction)
+  if (c.prep_walls_too_fast())
     next_note(os, 3) << c.prep_wall_impact_words();
 }
 

@@ -804,6 +804,7 @@ TEST(TriaxialScene, PreparationWallsTooFastForSoftGrainsAreNamed) {
   c.cv_to = 0.01;
   const double depth = c.prep_wall_impact_depth();
   EXPECT_GT(depth, TriaxialConfig::kWallImpactNoted * c.max_overlap_fraction);
+  EXPECT_TRUE(c.prep_walls_too_fast());
   const TriaxialResult fast = run_triaxial(c);
   EXPECT_EQ(fast.outcome.status, SceneStatus::unstable) << fast.outcome.message;
   EXPECT_EQ(fast.outcome.failed_stage, "isotropic_compression");
