@@ -27,6 +27,14 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 DB="$ROOT/seed-study.db"
 WORKERS=""
 OUT="$ROOT/docs/seed-study"
+# The seed's Table 2.2 (dense, 100 kPa, eta = 0.1, over theta) and Table 2.3 (theta = 30 deg,
+# over eta): the one transcription every table and chart below reads.
+SEED_THETA=(15 20 25 30 35 40)
+SEED_22_PK=(35.7 38.6 40.4 41.4 41.5 42.6)
+SEED_22_CV=(29.0 31.3 32.0 32.6 32.6 32.6)
+SEED_ETA=(0 0.1 0.3 0.5)
+SEED_23_PK=(35.0 41.4 45.5 47.2)
+SEED_23_CV=(27.6 32.6 37.9 40.9)
 SKIP_RUN=0
 WALLED=0
 DAMPING=0
@@ -175,9 +183,8 @@ set ylabel "friction angle [deg]"
 set key outside right
 set grid
 set xrange [-0.02:0.32]
-seedpk(e) = e == 0 ? 35.0 : e == 1 ? 41.4 : e == 2 ? 45.5 : 47.2
-seedcv(e) = e == 0 ? 27.6 : e == 1 ? 32.6 : e == 2 ? 37.9 : 40.9
-etas = "0 0.1 0.3 0.5"
+seedcv(e) = real(word("${SEED_23_CV[*]}", e+1))
+etas = "${SEED_ETA[*]}"
 set title "Dense triaxial, theta = 30 deg, 500 grains, mean of two packings; dotted: the seed's phi_cv"
 plot for [e=0:3] "$data" index e using 1:2 with linespoints lc e+1 pt 7 dt 2 title "phi_peak, eta ".word(etas, e+1), \\
      for [e=0:3] "$data" index e using 1:3 with linespoints lc e+1 pt 5 title "phi_cv, eta ".word(etas, e+1), \\
@@ -199,15 +206,13 @@ reference_tables() {
   echo
   echo "| row | seed φ_peak | demcal φ_peak (± sd; † a packing whose peak rests on a spike) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-  local pk=(35.7 38.6 40.4 41.4 41.5 42.6) cv=(29.0 31.3 32.0 32.6 32.6 32.6) i=0 th eta
-  for th in 15 20 25 30 35 40; do
-    table_row "$1" "θ $th°, η 0.1" $th 0.1 ${pk[$i]} ${cv[$i]}
-    i=$((i + 1))
+  local i
+  for i in "${!SEED_THETA[@]}"; do
+    table_row "$1" "θ ${SEED_THETA[$i]}°, η 0.1" "${SEED_THETA[$i]}" 0.1 "${SEED_22_PK[$i]}" "${SEED_22_CV[$i]}"
   done
-  pk=(35.0 45.5 47.2); cv=(27.6 37.9 40.9); i=0
-  for eta in 0 0.3 0.5; do
-    table_row "$2" "θ 30°, η $eta" 30 $eta ${pk[$i]} ${cv[$i]}
-    i=$((i + 1))
+  for i in "${!SEED_ETA[@]}"; do
+    [[ ${SEED_ETA[$i]} == 0.1 ]] && continue  # Table 2.2's row at theta = 30 deg
+    table_row "$2" "θ 30°, η ${SEED_ETA[$i]}" 30 "${SEED_ETA[$i]}" "${SEED_23_PK[$i]}" "${SEED_23_CV[$i]}"
   done
   echo
 }
@@ -268,22 +273,16 @@ damped_means() {
   echo
   echo "| θ | seed φ_peak | demcal φ_peak (± sd; † a packing whose peak rests on a spike) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-  seed_pk=(35.7 38.6 40.4 41.4 41.5 42.6); seed_cv=(29.0 31.3 32.0 32.6 32.6 32.6)
-  i=0
-  for th in 15 20 25 30 35 40; do
-    table_row "$tmp/seed-table-2-2.csv" "$th°" $th 0.1 ${seed_pk[$i]} ${seed_cv[$i]}
-    i=$((i + 1))
+  for i in "${!SEED_THETA[@]}"; do
+    table_row "$tmp/seed-table-2-2.csv" "${SEED_THETA[$i]}°" "${SEED_THETA[$i]}" 0.1 "${SEED_22_PK[$i]}" "${SEED_22_CV[$i]}"
   done
   echo
   echo "## Table 2.3: dense, 100 kPa, θ = 30°, over η"
   echo
   echo "| η | seed φ_peak | demcal φ_peak (± sd; † a packing whose peak rests on a spike) | Δ | seed φ_cv | demcal φ_cv (± sd) | Δ | ψ in the φ_cv window (* a packing not at critical state) | packings |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-  seed_pk=(35.0 41.4 45.5 47.2); seed_cv=(27.6 32.6 37.9 40.9)
-  i=0
-  for eta in 0 0.1 0.3 0.5; do
-    table_row "$tmp/seed-table-2-3.csv" "$eta" 30 $eta ${seed_pk[$i]} ${seed_cv[$i]}
-    i=$((i + 1))
+  for i in "${!SEED_ETA[@]}"; do
+    table_row "$tmp/seed-table-2-3.csv" "${SEED_ETA[$i]}" 30 "${SEED_ETA[$i]}" "${SEED_23_PK[$i]}" "${SEED_23_CV[$i]}"
   done
   echo
   reference_tables "$tmp/seed-dense-grid-n2000-kn3e5.csv" "$tmp/seed-dense-grid-n2000-kn3e5.csv" \
@@ -325,7 +324,9 @@ damped_means() {
     echo "| η | seed | damping 0 | 0.1 | 0.2 | 0.3 |"
     echo "| --- | --- | --- | --- | --- | --- |"
     damped_means "$tmp/seed-damping-in-shear.csv" eta |
-      awk -F'\t' 'BEGIN { s["0"] = "35.0° / 27.6°"; s["0.1"] = "41.4° / 32.6°"; s["0.3"] = "45.5° / 37.9°"; s["0.5"] = "47.2° / 40.9°" }
+      awk -F'\t' -v etas="${SEED_ETA[*]}" -v pks="${SEED_23_PK[*]}" -v cvs="${SEED_23_CV[*]}" \
+        'BEGIN { n = split(etas, et, " "); split(pks, pk, " "); split(cvs, cv, " ")
+                 for (i = 1; i <= n; ++i) s[et[i]] = pk[i] "° / " cv[i] "°" }
         { e = $1 + 0; key = sprintf("%g", e); if (!(key in row)) order[++m] = key
           row[key] = row[key] sprintf(" %.1f° / %.1f° (%.1f, %.1f) |", $4, $5, $6, $7) }
         END { for (i = 1; i <= m; ++i) printf "| %s | %s |%s\n", order[i], s[order[i]], row[order[i]] }'
@@ -336,8 +337,9 @@ damped_means() {
       echo "| θ | seed φ_peak | damped φ_peak | Δ | seed φ_cv | damped φ_cv | Δ |"
       echo "| --- | --- | --- | --- | --- | --- | --- |"
       damped_means "$tmp/seed-damping-in-shear-theta.csv" theta_deg |
-        awk -F'\t' 'BEGIN { split("35.7 38.6 40.4 41.4 41.5 42.6", pk, " "); split("29.0 31.3 32.0 32.6 32.6 32.6", cv, " "); split("15 20 25 30 35 40", th, " ")
-                             for (i = 1; i <= 6; ++i) { P[th[i]] = pk[i]; C[th[i]] = cv[i] } }
+        awk -F'\t' -v ths="${SEED_THETA[*]}" -v pks="${SEED_22_PK[*]}" -v cvs="${SEED_22_CV[*]}" \
+          'BEGIN { n = split(ths, th, " "); split(pks, pk, " "); split(cvs, cv, " ")
+                   for (i = 1; i <= n; ++i) { P[th[i]] = pk[i]; C[th[i]] = cv[i] } }
           { t = sprintf("%g", $1); printf "| %s° | %s° | %.1f° | %+.1f | %s° | %.1f° | %+.1f |\n", t, P[t], $4, $4 - P[t], C[t], $5, $5 - C[t] }'
     fi
     echo
