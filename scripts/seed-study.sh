@@ -35,6 +35,9 @@ SEED_22_CV=(29.0 31.3 32.0 32.6 32.6 32.6)
 SEED_ETA=(0 0.1 0.3 0.5)
 SEED_23_PK=(35.0 41.4 45.5 47.2)
 SEED_23_CV=(27.6 32.6 37.9 40.9)
+# The fit's targets: Table 2.2's row at theta = 30 deg, eta = 0.1 (the seed's answer).
+SEED_FIT_PK=${SEED_22_PK[3]}
+SEED_FIT_CV=${SEED_22_CV[3]}
 SKIP_RUN=0
 WALLED=0
 DAMPING=0
@@ -83,7 +86,7 @@ for m in phi_peak phi_cv phi_diff; do
   printf '%s\n' "${txt//"$OUT/"/}" > "$OUT/map_$m.txt"
 done
 fit_rc=0
-txt=$("$DEMCAL" fit --target phi_peak=41.4 --target phi_cv=32.6 --job seed-dense-grid --db "$DB" 2>&1) || fit_rc=$?
+txt=$("$DEMCAL" fit --target phi_peak=$SEED_FIT_PK --target phi_cv=$SEED_FIT_CV --job seed-dense-grid --db "$DB" 2>&1) || fit_rc=$?
 # Its hints name the database: by its file name, not this machine's path.
 printf '%s\n' "${txt//"$DB"/$(basename "$DB")}" > "$OUT/fit.txt"
 "$DEMCAL" map --metric phi_peak --job seed-dense-grid --db "$DB" --out "$OUT/map_phi_peak_fit.png" > /dev/null 2>&1 || true
@@ -348,7 +351,7 @@ damped_means() {
     echo "particles=2000 rate=3e-4 shear_damping=0.2\`) damping 0.2 puts the walls' φ_cv within"
     echo "2.0° of the seed in eight of the nine rows of Tables 2.2 and 2.3 (undamped: 3.3–8.7°"
     echo "low), and on the seed's 10,000 grains at θ = 30°, η = 0.1 it gives 42.7° / 32.4°"
-    echo "(seed 41.4° / 32.6°). **The contact network is not stronger, though:** the interior"
+    echo "(seed $SEED_FIT_PK° / $SEED_FIT_CV°). **The contact network is not stronger, though:** the interior"
     echo "Love-Weber φ_cv (metric \`phi_cv_interior_deg\`) stays at 27.6–28.1° with or without"
     echo "damping at η = 0.1 and is 27.7° on 10,000 grains. The damping forces oppose the"
     echo "systematic deformation and carry part of the axial load. The seed's numbers match a"
@@ -416,9 +419,9 @@ damped_means() {
     grep '^(phi_peak ' "$OUT/map_phi_peak.txt" | sed 's/^(\(.*\))$/The rule, as `demcal map` prints it: \1./' || true
   fi
   echo
-  echo "## Inverse fit of the seed's targets (φ_peak 41.4°, φ_cv 32.6°; answer θ = 30°, η = 0.1)"
+  echo "## Inverse fit of the seed's targets (φ_peak $SEED_FIT_PK°, φ_cv $SEED_FIT_CV°; answer θ = 30°, η = 0.1)"
   echo
-  echo "\`demcal fit --target phi_peak=41.4 --target phi_cv=32.6 --job seed-dense-grid\` (exit $fit_rc):"
+  echo "\`demcal fit --target phi_peak=$SEED_FIT_PK --target phi_cv=$SEED_FIT_CV --job seed-dense-grid\` (exit $fit_rc):"
   echo
   echo '```'; cat "$OUT/fit.txt"; echo '```'
   echo
