@@ -8,6 +8,7 @@
 #include "particles.hpp"
 #include "wall.hpp"
 
+#include <atomic>
 #include <chrono>
 #include <string>
 #include <vector>
@@ -44,6 +45,19 @@ struct ForceSink {
   Vec3* buf_f;
   Vec3* buf_t;
   int bound;
+};
+
+// The number of the last force evaluation whose pair rows a block has finished,
+// published with release order after its buffer is written, read with acquire order
+// by the blocks above before they add that buffer. A copied world copies the value.
+struct alignas(64) BlockMark {
+  std::atomic<long> done{-1};
+  BlockMark() = default;
+  BlockMark(const BlockMark& o) : done(o.done.load(std::memory_order_relaxed)) {}
+  BlockMark& operator=(const BlockMark& o) {
+    done.store(o.done.load(std::memory_order_relaxed), std::memory_order_relaxed);
+    return *this;
+  }
 };
 
 // One thread's sum over its grains of the force on them from one wall.
@@ -146,7 +160,7 @@ class World {
   void clear_thread_sums();
   void block_forces(bool kick, std::chrono::steady_clock::time_point& clock, double& t_pairs, double& t_walls);
   bool end_forces(std::chrono::steady_clock::time_point& clock, double t_pairs, double t_walls);
-  void half_kick(int begin, int end, ThreadAcc& acc);
+  void half_kick(int begin, int end, int shared_end, ThreadAcc& acc);
   template <bool Periodic>
   bool drift_block(int blk, bool listed);
   template <bool Periodic>
@@ -158,6 +172,10 @@ class World {
   void assign_blocks();
   void block_pairs(int blk, bool periodic, bool frictional);
   void add_lower_buffers(int blk);
+  void wait_for_lower_blocks(int blk, long eval) const;
+  void finish_grains(int blk, int begin, int end, bool kick, int tid,
+                     std::chrono::steady_clock::time_point& clock, double& t_walls);
+  int shared_hi(int blk) const;
   bool blocks_fit() const;
   bool blocks_stale() const;
   int block_lo(int tid) const;
@@ -200,6 +218,11 @@ class World {
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
   std::vector<int> row_lo_;  // first pair row of each thread's block, and n
   std::vector<int> reach_;   // one past the highest grain each block's list entries name
+  // One past the highest grain of each block that a lower block's pairs reach: the
+  // block's grains [row_lo_, shared_hi_) are read by another thread's pair loop.
+  std::vector<int> shared_hi_;
+  std::vector<BlockMark> marks_;  // per block: the last evaluation whose pairs it finished
+  long evals_ = 0;                // force evaluations so far (the marks' numbers)
   long blocks_builds_ = -1;  // the list build the blocks were cut for
   std::vector<ThreadAcc> acc_;
   std::vector<WallPartial> wall_part_;
