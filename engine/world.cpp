@@ -482,8 +482,9 @@ void World::half_kick(int begin, int end, int shared_end, ThreadAcc& acc) {
   };
   const int split = std::clamp(shared_end, begin, end);
   for (int i = begin; i < split; ++i) {
-    prefetch_for_write(a.v + i + kPrefetchAhead);
-    prefetch_for_write(a.w + i + kPrefetchAhead);
+    const int ahead = std::min(i + kPrefetchAhead, split - 1);  // no pointer past the arrays
+    prefetch_for_write(a.v + ahead);
+    prefetch_for_write(a.w + ahead);
     kick(i);
   }
   for (int i = split; i < end; ++i) kick(i);
@@ -730,9 +731,10 @@ bool World::drift_block(int blk, bool listed) {
   const int shared_end = shared_hi(blk);
   for (int i = block_lo(blk), end = block_lo(blk + 1); i < end; ++i) {
     if (i < shared_end) {  // prefetch_for_write; a run at the block's start, predictable
-      prefetch_for_write(a.x + i + kPrefetchAhead);
-      prefetch_for_write(a.v + i + kPrefetchAhead);
-      prefetch_for_write(a.w + i + kPrefetchAhead);
+      const int ahead = std::min(i + kPrefetchAhead, shared_end - 1);  // no pointer past the arrays
+      prefetch_for_write(a.x + ahead);
+      prefetch_for_write(a.v + ahead);
+      prefetch_for_write(a.w + ahead);
     }
     a.kick(i, half);
     a.x[i] += dt * a.v[i];
