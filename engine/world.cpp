@@ -434,7 +434,8 @@ void World::external_forces(int begin, int end, ThreadAcc& acc) {
     for (int i = begin; i < end; ++i)
       if (!fixed[i]) f[i] += m[i] * g;
   if (alpha == 0.0) return;
-  acc.net_force_sum += free_force_sum(begin, end);  // a block comes in two runs  // the imbalance the damping is about to hide
+  // The imbalance the damping is about to hide; a block's grains come in two runs.
+  acc.net_force_sum += free_force_sum(begin, end);
   // Cundall's local damping, -alpha |F| sign(v) per component, with sign(v) written
   // as copysign times (v != 0): the direction of motion is an unpredictable branch.
   // The loop runs over the components as one flat array so that it vectorises; it
